@@ -1,0 +1,1 @@
+"""The ``usd-garment`` command line (installed as ``usd_garment.cli``)."""

@@ -1,0 +1,93 @@
+"""``usd-garment body``: inspect, export and rebuild body models."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+import numpy as np
+import torch
+import trimesh
+
+from usd_garment.atomic import atomic_output
+from usd_garment.body import NUM_BETAS, load_body_model
+from usd_garment.body.measure import body_summary
+from usd_garment.cli.errors import user_errors
+
+body_model_option = click.option(
+    "--body-model",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="SMPL-layout body file (.npz/.pkl); default: the embedded free body.",
+)
+
+
+@click.group()
+def body() -> None:
+    """Body models: inspect, export, rebuild the default."""
+
+
+@body.command("info")
+@body_model_option
+@click.option("--json", "as_json", is_flag=True, help="Print a JSON summary.")
+def info(body_model: Path | None, as_json: bool) -> None:
+    """Vertex, face and joint counts, joint names and heights of a body model."""
+    with user_errors():
+        summary = body_summary(load_body_model(body_model))
+    if as_json:
+        click.echo(json.dumps(summary, indent=2))
+        return
+    click.echo(f"body model   {summary['name']}")
+    click.echo(f"vertices     {summary['vertices']}")
+    click.echo(f"faces        {summary['faces']}")
+    click.echo(f"joints       {summary['joints']}: {', '.join(summary['joint_names'])}")
+    click.echo(f"pose blendshapes  {'yes' if summary['pose_blendshapes'] else 'no'}")
+    click.echo(f"height (beta=0)   {summary['height_m']:.3f} m")
+    lo, hi = summary["height_range_beta1_m"]
+    click.echo(f"height over beta1 in [-2, 2]   {lo:.3f} .. {hi:.3f} m")
+
+
+def _parse_betas(text: str | None) -> np.ndarray:
+    betas = np.zeros(NUM_BETAS, dtype=np.float32)
+    if text:
+        values = [float(x) for x in text.replace(",", " ").split()]
+        if len(values) > NUM_BETAS:
+            raise click.BadParameter(f"at most {NUM_BETAS} values", param_hint="--betas")
+        betas[: len(values)] = values
+    return betas
+
+
+@body.command("export")
+@body_model_option
+@click.option("--betas", default=None, help="Up to 10 shape coefficients, e.g. '1.5,-0.5'.")
+@click.option(
+    "--pose-npz",
+    type=click.Path(exists=True, dir_okay=False, path_type=Path),
+    default=None,
+    help="npz with 'poses' (72+ axis-angle values, first frame used) and optional 'trans'.",
+)
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="Mesh file to write (.obj or .ply).")
+def export(body_model: Path | None, betas: str | None, pose_npz: Path | None,
+           output: Path) -> None:
+    """Write the (shaped, posed) body as a mesh file through trimesh."""
+    if output.suffix.lower() not in (".obj", ".ply"):
+        raise click.BadParameter("the output must end in .obj or .ply", param_hint="-o")
+    pose = np.zeros((1, 24, 3), dtype=np.float32)
+    if pose_npz is not None:
+        with np.load(pose_npz) as data:
+            if "poses" not in data.files:
+                raise click.ClickException(f"{pose_npz}: no 'poses' array")
+            poses = np.asarray(data["poses"], dtype=np.float32).reshape(-1, data["poses"].shape[-1])
+            if poses.shape[1] < 66:
+                raise click.ClickException(f"{pose_npz}: 'poses' needs at least 66 values")
+            pose[0, : min(24, poses.shape[1] // 3)] = poses[0, :72].reshape(-1, 3)
+    with user_errors():
+        model = load_body_model(body_model)
+        with torch.no_grad():
+            out = model(torch.from_numpy(_parse_betas(betas))[None], torch.from_numpy(pose))
+        mesh = trimesh.Trimesh(out.vertices[0].numpy(), model.faces.numpy(), process=False)
+        with atomic_output(output) as tmp:
+            mesh.export(tmp)
+    click.echo(f"wrote {output}")

@@ -1,0 +1,92 @@
+"""Linear blend skinning in small pure functions, read top to bottom as SMPL's equations.
+
+Shapes use B for the batch (frames), V for vertices, J for joints, K for betas and P for
+pose-blendshape features (9 × (J − 1) = 207 for SMPL). Units are metres and radians.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import torch
+
+
+def batch_rodrigues(rot_vecs: torch.Tensor, eps: float = 1e-8) -> torch.Tensor:
+    """Axis-angle vectors ``(..., 3)`` to rotation matrices ``(..., 3, 3)``."""
+    angle = torch.linalg.norm(rot_vecs + eps, dim=-1, keepdim=True)  # (..., 1)
+    axis = rot_vecs / angle
+    cos = torch.cos(angle)[..., None]
+    sin = torch.sin(angle)[..., None]
+    x, y, z = axis.unbind(-1)
+    zeros = torch.zeros_like(x)
+    k = torch.stack([zeros, -z, y, z, zeros, -x, -y, x, zeros], dim=-1)
+    k = k.reshape(*rot_vecs.shape[:-1], 3, 3)
+    eye = torch.eye(3, dtype=rot_vecs.dtype, device=rot_vecs.device)
+    return eye + sin * k + (1.0 - cos) * (k @ k)
+
+
+def blend_shapes(coeffs: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
+    """Per-vertex offsets ``(B, V, 3)`` from coefficients ``(B, K)`` and blendshapes ``(V, 3, K)``."""
+    return torch.einsum("bk,vck->bvc", coeffs, dirs)
+
+
+def vertices2joints(regressor: torch.Tensor, vertices: torch.Tensor) -> torch.Tensor:
+    """Joint locations ``(B, J, 3)`` from a regressor ``(J, V)`` and vertices ``(B, V, 3)``."""
+    return torch.einsum("jv,bvc->bjc", regressor, vertices)
+
+
+def pose_features(rot_mats: torch.Tensor) -> torch.Tensor:
+    """SMPL pose-blendshape features ``(B, 9·(J−1))``: (R − I) of every joint but the root."""
+    eye = torch.eye(3, dtype=rot_mats.dtype, device=rot_mats.device)
+    return (rot_mats[:, 1:] - eye).flatten(1)
+
+
+def batch_rigid_transform(
+    rot_mats: torch.Tensor, joints: torch.Tensor, parents: Sequence[int]
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Forward kinematics.
+
+    Args:
+        rot_mats: ``(B, J, 3, 3)`` local joint rotations.
+        joints: ``(B, J, 3)`` rest joint locations (m).
+        parents: ``J`` parent indices, ``-1`` for the root; parents precede children.
+
+    Returns:
+        posed_joints ``(B, J, 3)`` and skinning transforms ``(B, J, 4, 4)`` that map a rest-pose
+        point to its posed location under joint j alone.
+    """
+    b, j = joints.shape[:2]
+    rel_joints = joints.clone()
+    parent_idx = torch.as_tensor(parents[1:], device=joints.device)
+    rel_joints[:, 1:] = joints[:, 1:] - joints[:, parent_idx]
+    local = torch.zeros(b, j, 4, 4, dtype=joints.dtype, device=joints.device)
+    local[..., :3, :3] = rot_mats
+    local[..., :3, 3] = rel_joints
+    local[..., 3, 3] = 1.0
+    chain = [local[:, 0]]
+    for i in range(1, j):
+        chain.append(chain[parents[i]] @ local[:, i])
+    world = torch.stack(chain, dim=1)  # (B, J, 4, 4)
+    posed_joints = world[..., :3, 3]
+    rest_offset = torch.einsum("bjcd,bjd->bjc", world[..., :3, :3], joints)
+    skinning = world.clone()
+    skinning[..., :3, 3] = posed_joints - rest_offset
+    return posed_joints, skinning
+
+
+def skin(points: torch.Tensor, weights: torch.Tensor, transforms: torch.Tensor) -> torch.Tensor:
+    """Linear blend skinning.
+
+    Args:
+        points: ``(B, N, 3)`` rest-pose points (m).
+        weights: ``(N, J)`` or ``(B, N, J)`` skinning weights, rows summing to 1.
+        transforms: ``(B, J, 4, 4)`` skinning transforms from :func:`batch_rigid_transform`.
+
+    Returns:
+        ``(B, N, 3)`` posed points (m).
+    """
+    if weights.dim() == 2:
+        blended = torch.einsum("nj,bjcd->bncd", weights, transforms[..., :3, :])
+    else:
+        blended = torch.einsum("bnj,bjcd->bncd", weights, transforms[..., :3, :])
+    return torch.einsum("bncd,bnd->bnc", blended[..., :3], points) + blended[..., 3]
