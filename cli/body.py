@@ -67,10 +67,14 @@ def _parse_betas(text: str | None) -> np.ndarray:
     default=None,
     help="npz with 'poses' (72+ axis-angle values, first frame used) and optional 'trans'.",
 )
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
-              help="Mesh file to write (.obj or .ply).")
-def export(body_model: Path | None, betas: str | None, pose_npz: Path | None,
-           output: Path) -> None:
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(dir_okay=False, path_type=Path),
+    required=True,
+    help="Mesh file to write (.obj or .ply).",
+)
+def export(body_model: Path | None, betas: str | None, pose_npz: Path | None, output: Path) -> None:
     """Write the (shaped, posed) body as a mesh file through trimesh."""
     if output.suffix.lower() not in (".obj", ".ply"):
         raise click.BadParameter("the output must end in .obj or .ply", param_hint="-o")

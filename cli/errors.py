@@ -2,15 +2,12 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from contextlib import contextmanager
-from typing import TypeVar
 
 import click
 
 from usd_garment.body.io import BodyModelError
-
-F = TypeVar("F", bound=Callable[..., object])
 
 #: Library exceptions that mean bad input rather than a bug.
 USER_ERRORS: tuple[type[Exception], ...] = (BodyModelError, ValueError, FileNotFoundError)
@@ -22,4 +19,5 @@ def user_errors() -> Iterator[None]:
     try:
         yield
     except USER_ERRORS as exc:
-        raise click.ClickException(str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
+        message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise click.ClickException(message) from exc

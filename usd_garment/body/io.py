@@ -113,7 +113,8 @@ def load_body_model(path: str | Path | None = None) -> BodyModel:
     raw = _read_raw(path)
     missing = [k for k in REQUIRED_KEYS if k not in raw]
     if missing:
-        raise BodyModelError(f"{path}: not an SMPL-layout body model (missing {', '.join(missing)})")
+        names = ", ".join(missing)
+        raise BodyModelError(f"{path}: not an SMPL-layout body model (missing {names})")
     v_template = _dense(raw["v_template"]).astype(np.float32)
     v = v_template.shape[0]
     shapedirs = _dense(raw["shapedirs"]).astype(np.float32)

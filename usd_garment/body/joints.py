@@ -37,6 +37,7 @@ SMPL_PARENTS: tuple[int, ...] = (
 NUM_JOINTS: int = len(SMPL_JOINT_NAMES)
 NUM_BETAS: int = 10
 
+
 #: USD joint paths of the SMPL skeleton (parent/child/...), as UsdSkel wants them.
 def smpl_joint_paths() -> list[str]:
     """Return the 24 UsdSkel joint paths, e.g. ``pelvis/spine1/spine2``, in SMPL order."""

@@ -26,7 +26,7 @@ def batch_rodrigues(rot_vecs: torch.Tensor, eps: float = 1e-8) -> torch.Tensor:
 
 
 def blend_shapes(coeffs: torch.Tensor, dirs: torch.Tensor) -> torch.Tensor:
-    """Per-vertex offsets ``(B, V, 3)`` from coefficients ``(B, K)`` and blendshapes ``(V, 3, K)``."""
+    """Per-vertex offsets ``(B, V, 3)`` from coefficients ``(B, K)`` and dirs ``(V, 3, K)``."""
     return torch.einsum("bk,vck->bvc", coeffs, dirs)
 
 

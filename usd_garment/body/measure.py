@@ -33,5 +33,7 @@ def body_summary(model: BodyModel) -> dict[str, Any]:
         "pose_blendshapes": model.has_pose_blendshapes,
         "height_m": round(float(h0), 4),
         "height_range_beta1_m": [round(float(h.min()), 4), round(float(h.max()), 4)],
-        "height_at_beta1_m": {f"{b:+.0f}": round(float(x), 4) for b, x in zip(betas[:, 0], h)},
+        "height_at_beta1_m": {
+            f"{b:+.0f}": round(float(x), 4) for b, x in zip(betas[:, 0], h, strict=True)
+        },
     }

@@ -33,8 +33,10 @@ class SmplMotion:
     def __post_init__(self) -> None:
         t = self.pose.shape[0]
         if self.pose.shape != (t, 24, 3) or self.trans.shape != (t, 3):
-            raise ValueError(f"pose must be (T, 24, 3) and trans (T, 3), got "
-                             f"{self.pose.shape} and {self.trans.shape}")
+            raise ValueError(
+                f"pose must be (T, 24, 3) and trans (T, 3), got "
+                f"{self.pose.shape} and {self.trans.shape}"
+            )
         if self.betas.shape != (10,):
             raise ValueError(f"betas must be (10,), got {self.betas.shape}")
         if self.time_codes.shape[0] != t:
