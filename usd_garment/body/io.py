@@ -129,7 +129,8 @@ def load_body_model(path: str | Path | None = None) -> BodyModel:
     if n > NUM_JOINTS:
         j_regressor, weights = _reduce_to_smpl_joints(j_regressor, weights, parents)
         posedirs = np.zeros((v, 3, 0))  # SMPL-H/X pose correctives do not apply to 24 joints
-    parents_24 = [int(p) if p < n else -1 for p in parents[:NUM_JOINTS]]
+        parents = np.concatenate([parents[:22], [20, 21]])
+    parents_24 = [int(p) for p in parents[:NUM_JOINTS]]
     parents_24[0] = -1
     if tuple(parents_24) != SMPL_PARENTS:
         raise BodyModelError(f"{path}: the kinematic tree is not SMPL's")

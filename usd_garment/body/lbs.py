@@ -13,7 +13,7 @@ import torch
 
 def batch_rodrigues(rot_vecs: torch.Tensor, eps: float = 1e-8) -> torch.Tensor:
     """Axis-angle vectors ``(..., 3)`` to rotation matrices ``(..., 3, 3)``."""
-    angle = torch.linalg.norm(rot_vecs + eps, dim=-1, keepdim=True)  # (..., 1)
+    angle = torch.sqrt(rot_vecs.square().sum(-1, keepdim=True) + eps * eps)  # (..., 1), rad
     axis = rot_vecs / angle
     cos = torch.cos(angle)[..., None]
     sin = torch.sin(angle)[..., None]
