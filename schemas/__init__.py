@@ -1,0 +1,1 @@
+"""Codeless USD schema of usd-garment (SmplBodyAPI, GarmentAPI): data files only."""

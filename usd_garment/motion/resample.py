@@ -1,0 +1,40 @@
+"""Resample an SMPL motion to another frame rate: slerp joint rotations, lerp translations."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from usd_garment.motion.sequence import SmplMotion
+
+
+def resample_motion(motion: SmplMotion, fps: float) -> SmplMotion:
+    """``motion`` sampled at ``fps`` over the same duration (first frame kept, last frame at or
+    before the original end). Time codes restart at 0, one per frame."""
+    if not np.isfinite(fps) or fps <= 0:
+        raise ValueError(f"fps must be positive, got {fps}")
+    t = motion.num_frames
+    if np.isclose(fps, motion.fps):
+        return motion
+    if t == 1:
+        return SmplMotion(motion.betas, motion.pose, motion.trans, float(fps),
+                          gender=motion.gender, model=motion.model)  # fmt: skip
+    duration = (t - 1) / motion.fps
+    count = int(np.floor(duration * fps + 1e-6)) + 1
+    u = np.arange(count) / fps * motion.fps  # fractional source frame of each output frame
+    i0 = np.minimum(np.floor(u).astype(int), t - 2)
+    alpha = (u - i0)[:, None]
+    trans = (1.0 - alpha) * motion.trans[i0] + alpha * motion.trans[i0 + 1]
+    j = motion.pose.shape[1]
+    r0 = Rotation.from_rotvec(motion.pose[i0].reshape(-1, 3).astype(np.float64))
+    r1 = Rotation.from_rotvec(motion.pose[i0 + 1].reshape(-1, 3).astype(np.float64))
+    delta = (r0.inv() * r1).as_rotvec() * np.repeat(alpha, j, axis=0)
+    pose = (r0 * Rotation.from_rotvec(delta)).as_rotvec().reshape(count, j, 3)
+    return SmplMotion(
+        betas=motion.betas,
+        pose=pose.astype(motion.pose.dtype),
+        trans=trans.astype(motion.trans.dtype),
+        fps=float(fps),
+        gender=motion.gender,
+        model=motion.model,
+    )
