@@ -1,14 +1,22 @@
+"""Entry point of the ``usd-garment`` command: registers the command groups."""
 
 from __future__ import annotations
 
 import click
 
+from usd_garment import __version__
+from usd_garment.cli.amass import export_amass, import_amass
+from usd_garment.cli.body import body
+from usd_garment.cli.garment import garment
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="usd-garment")
 def main() -> None:
+    """Dress animated SMPL bodies in USD with learned, collision-free garments."""
 
 
 main.add_command(body)
+main.add_command(garment)
 main.add_command(import_amass)
 main.add_command(export_amass)

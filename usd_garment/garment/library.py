@@ -1,0 +1,135 @@
+"""Garment template files: the committed templates of the default body, and templates computed
+(once, then cached) for a user's body model.
+
+A template file is an ``.npz`` with vertices ``(N, 3)`` float32, faces ``(F, 3)`` int32, uvs
+``(N, 2)`` float32 and string/int metadata: name, lod, body, body_fingerprint, recipe_version.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from usd_garment.atomic import atomic_output
+from usd_garment.body.io import load_body_model
+from usd_garment.body.joints import NUM_BETAS
+from usd_garment.body.model import BodyModel
+from usd_garment.garment.template import GARMENT_NAMES, LODS, GarmentTemplate
+from usd_garment.garment.templates import RECIPE_VERSION, make_template
+
+
+@dataclass(frozen=True)
+class Provenance:
+    """Where a template file came from: the rest body it was fitted to and the recipe version."""
+
+    body_fingerprint: str
+    recipe_version: int
+
+
+def body_fingerprint(body: BodyModel) -> str:
+    """A short hash of the body's rest shape (β = 0 vertices, faces) and skinning weights."""
+    with torch.no_grad():
+        rest, _ = body.shaped(torch.zeros(1, NUM_BETAS))
+    digest = hashlib.sha256()
+    for array in (rest[0], body.faces, body.weights):
+        digest.update(np.ascontiguousarray(array.numpy()).tobytes())
+    return digest.hexdigest()[:16]
+
+
+def template_dir() -> Path:
+    """Folder of the committed templates of the default body."""
+    return Path(str(resources.files("usd_garment") / "data" / "garments"))
+
+
+def cache_dir() -> Path:
+    """Folder of templates computed for users' bodies (``$XDG_CACHE_HOME`` or ``~/.cache``)."""
+    root = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(root) / "usd-garment" / "garments"
+
+
+def template_filename(name: str, lod: str) -> str:
+    """File name of a template, e.g. ``tshirt_high.npz``."""
+    return f"{name}_{lod}.npz"
+
+
+def save_template(path: str | Path, template: GarmentTemplate, provenance: Provenance) -> None:
+    """Write a template file atomically (a temporary file renamed onto ``path``)."""
+    with atomic_output(path) as tmp:
+        np.savez_compressed(
+            tmp,
+            vertices=template.vertices.astype(np.float32),
+            faces=template.faces.astype(np.int32),
+            uvs=template.uvs.astype(np.float32),
+            name=np.array(template.name),
+            lod=np.array(template.lod),
+            body=np.array(template.body),
+            body_fingerprint=np.array(provenance.body_fingerprint),
+            recipe_version=np.array(provenance.recipe_version),
+        )
+
+
+def read_template(path: str | Path) -> tuple[GarmentTemplate, Provenance]:
+    """Read a template file.
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: the file is not a template file.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such garment template file")
+    try:
+        with np.load(path) as data:
+            template = GarmentTemplate(
+                name=str(data["name"]),
+                lod=str(data["lod"]),
+                vertices=data["vertices"].astype(np.float32),
+                faces=data["faces"].astype(np.int32),
+                uvs=data["uvs"].astype(np.float32),
+                body=str(data["body"]),
+            )
+            provenance = Provenance(str(data["body_fingerprint"]), int(data["recipe_version"]))
+    except (OSError, KeyError, ValueError) as exc:
+        raise ValueError(f"{path}: not a garment template file ({exc})") from exc
+    return template, provenance
+
+
+def _check(name: str, lod: str) -> None:
+    if name not in GARMENT_NAMES:
+        raise ValueError(f"unknown garment '{name}' (known: {', '.join(GARMENT_NAMES)})")
+    if lod not in LODS:
+        raise ValueError(f"unknown level of detail '{lod}' (known: {', '.join(LODS)})")
+
+
+def load_template(
+    name: str, lod: str = "high", body_model_path: str | Path | None = None
+) -> GarmentTemplate:
+    """The template of garment ``name`` at level of detail ``lod``.
+
+    Without ``body_model_path`` it is the committed template of the default body; with one, it
+    is computed for that body's rest shape on first use and cached under ``cache_dir()``, keyed by
+    the body's fingerprint and the recipe version.
+
+    Raises:
+        ValueError: unknown name or level of detail, or an unreadable template file.
+        BodyModelError: the body model file cannot be loaded.
+    """
+    _check(name, lod)
+    if body_model_path is None:
+        return read_template(template_dir() / template_filename(name, lod))[0]
+    body = load_body_model(body_model_path)
+    provenance = Provenance(body_fingerprint(body), RECIPE_VERSION)
+    folder = cache_dir() / f"{provenance.body_fingerprint}-v{RECIPE_VERSION}"
+    path = folder / template_filename(name, lod)
+    if path.is_file():
+        return read_template(path)[0]
+    template = make_template(body, name, lod)
+    folder.mkdir(parents=True, exist_ok=True)
+    save_template(path, template, provenance)
+    return template
