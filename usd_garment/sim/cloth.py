@@ -1,0 +1,439 @@
+"""Physics simulation of a garment worn by an animated body, with NVIDIA Newton's Style3D cloth
+solver: the training data of the generative garment model (numpy in, numpy out).
+
+The body is one triangle mesh collider whose vertices are overwritten every substep, linearly
+interpolated between the frames given. ``warp`` and ``newton`` (the ``[train]`` extra) are
+imported when a simulator is built, not with this module.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from usd_garment.sim.checks import CheckLimits, FrameCheck, check_frame, unique_edges
+from usd_garment.sim.material import ClothMaterial
+
+#: Gravity along -Y (m/s²); our canonical frame is Y-up, metres.
+GRAVITY = 9.81
+#: Margin (m) around the body's broad-phase box.
+AABB_PAD = 0.05
+
+
+@dataclass(frozen=True)
+class ContactSettings:
+    """Cloth-body and cloth-cloth contact parameters of the solver.
+
+    Attributes:
+        radius: particle radius (m); the cloth rests this far from the skin.
+        gap: extra detection distance (m) beyond ``radius``: contacts are found only for
+            vertices closer than ``radius + gap`` to the body surface, inside or out, so a
+            vertex that gets deeper than ``gap`` into the body in one substep is lost.
+        stiffness: penalty stiffness of the body contact (N/m per vertex).
+        damping: damping of the body contact along its normal (N·s/m).
+        self_radius: half-thickness of cloth-cloth contacts (m); Style3D's default is 3 mm.
+    """
+
+    radius: float = 2e-3
+    gap: float = 2e-2
+    stiffness: float = 1e3
+    damping: float = 1e-4
+    self_radius: float = 3e-3
+
+
+def _import_newton() -> tuple[Any, Any]:
+    """``(warp, newton)``, with a clear error when the ``[train]`` extra is missing."""
+    try:
+        import newton
+        import warp as wp
+    except ImportError as exc:  # pragma: no cover - depends on the installation
+        raise ImportError(
+            "garment simulation needs NVIDIA Newton: pip install 'usd-garment[train]'"
+        ) from exc
+    wp.config.log_level = wp.LOG_WARNING  # no kernel-cache chatter: the library never prints
+    return wp, newton
+
+
+def panel_layout(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Per-triangle 2D rest shapes: each rest triangle flattened isometrically on its own.
+
+    Style3D takes its rest geometry (lengths, areas, bending cotangents, mass) from a 2D panel
+    layout. Flattening every triangle separately reproduces the 3D rest mesh exactly (a curved
+    garment has no single isometric flattening). Each triangle's 2D frame has its ``v`` axis
+    along world +Y projected onto the triangle (the warp runs down the garment, the weft around
+    it); where the triangle faces up or down, along world +Z instead. The ``u`` axis completes a
+    frame whose normal is the triangle's, so counter-clockwise triangles keep positive area.
+
+    Args:
+        vertices: ``(N, 3)`` rest positions (m).
+        faces: ``(F, 3)`` triangles.
+
+    Returns:
+        ``(F, 3, 2)`` panel coordinates (m) of each triangle's corners, in the faces' order.
+    """
+    tri = np.asarray(vertices, dtype=np.float64)[np.asarray(faces)]
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-30)
+    grain = np.where(np.abs(normal[:, 1:2]) < 0.9, [[0.0, 1.0, 0.0]], [[0.0, 0.0, 1.0]])
+    v_axis = grain - np.einsum("fi,fi->f", grain, normal)[:, None] * normal
+    v_axis /= np.maximum(np.linalg.norm(v_axis, axis=1, keepdims=True), 1e-30)
+    u_axis = np.cross(v_axis, normal)
+    local = tri - tri[:, :1]
+    return np.stack(
+        [np.einsum("fki,fi->fk", local, u_axis), np.einsum("fki,fi->fk", local, v_axis)], axis=-1
+    )
+
+
+class GarmentSimulator:
+    """One garment on one animated body, advanced one frame at a time.
+
+    Style3D (projective dynamics, implicit Euler) with ``substeps`` steps of ``iterations``
+    non-linear iterations per frame; gravity -9.81 m/s² along -Y. Contacts with the body are
+    collected before each substep against the body interpolated to the end of that substep.
+    Warp runs CPU kernels on one thread: run one simulator per core.
+    """
+
+    def __init__(
+        self,
+        rest_vertices: np.ndarray,
+        faces: np.ndarray,
+        body_faces: np.ndarray,
+        body_vertices0: np.ndarray,
+        material: ClothMaterial | None = None,
+        *,
+        substeps: int = 4,
+        iterations: int = 4,
+        fps: float = 30.0,
+        contact: ContactSettings | None = None,
+        initial_vertices: np.ndarray | None = None,
+        device: str = "cpu",
+    ) -> None:
+        """Build the Newton model.
+
+        Args:
+            rest_vertices: ``(N, 3)`` garment rest shape (m): defines rest lengths, areas, mass.
+            faces: ``(F, 3)`` garment triangles, counter-clockwise seen from outside.
+            body_faces: ``(Fb, 3)`` body triangles, counter-clockwise seen from outside.
+            body_vertices0: ``(Vb, 3)`` body at the start (m).
+            material: the fabric; SNUG's cotton by default.
+            substeps: solver steps per frame.
+            iterations: non-linear iterations per solver step.
+            fps: frames per second of the body motion.
+            contact: contact parameters; ``ContactSettings()`` by default.
+            initial_vertices: ``(N, 3)`` garment start positions; ``rest_vertices`` by default.
+            device: Warp device, ``"cpu"`` or e.g. ``"cuda:0"``.
+
+        Raises:
+            ValueError: arrays of the wrong shape or with non-finite values.
+        """
+        rest = _points(rest_vertices, "rest_vertices")
+        faces = _faces(faces, len(rest), "faces")
+        body0 = _points(body_vertices0, "body_vertices0")
+        body_faces = _faces(body_faces, len(body0), "body_faces")
+        start = rest if initial_vertices is None else _points(initial_vertices, "initial_vertices")
+        if start.shape != rest.shape:
+            raise ValueError(f"initial_vertices must be {rest.shape}, got {start.shape}")
+        if substeps < 1 or iterations < 1 or not fps > 0:
+            raise ValueError("substeps and iterations must be >= 1 and fps > 0")
+
+        wp, newton = _import_newton()
+        from newton.solvers import SolverStyle3D, style3d
+
+        from usd_garment.sim import body_query
+
+        self.material = material or ClothMaterial()
+        self.contact = contact or ContactSettings()
+        self.substeps = substeps
+        self.iterations = iterations
+        self.fps = float(fps)
+        self.num_vertices = len(rest)
+        self._body_query = body_query
+
+        builder = newton.ModelBuilder(up_axis=newton.Axis.Y)
+        SolverStyle3D.register_custom_attributes(builder)
+        builder.default_edge_ke = self.material.solver_bending_stiffness
+        k_stretch = self.material.stretch_stiffness
+        style3d.add_cloth_mesh(
+            builder,
+            pos=wp.vec3(0.0, 0.0, 0.0),
+            rot=wp.quat_identity(),
+            vel=wp.vec3(0.0, 0.0, 0.0),
+            vertices=start,
+            indices=faces.ravel(),
+            density=self.material.area_density,
+            panel_verts=panel_layout(rest, faces).reshape(-1, 2),
+            panel_indices=np.arange(3 * len(faces)),
+            tri_aniso_ke=wp.vec3(k_stretch, k_stretch, self.material.shear_stiffness),
+            particle_radius=self.contact.radius,
+        )
+        # The solver mixes the cloth's and the shape's friction as sqrt(mu_cloth * mu_shape).
+        shape_cfg = newton.ModelBuilder.ShapeConfig(mu=self.material.friction)
+        self._body_mesh = newton.Mesh(body0, body_faces.ravel(), compute_inertia=False)
+        self._body_shape = builder.add_shape_mesh(body=-1, mesh=self._body_mesh, cfg=shape_cfg)
+        self.model = builder.finalize(device=device)
+        self.model.set_gravity((0.0, -GRAVITY, 0.0))
+        self.model.soft_contact_ke = self.contact.stiffness
+        self.model.soft_contact_kd = self.contact.damping
+        self.model.soft_contact_mu = self.material.friction
+
+        with contextlib.redirect_stdout(io.StringIO()):  # its set-up timer prints
+            self.solver = SolverStyle3D(
+                self.model, config=SolverStyle3D.Config(iterations=iterations)
+            )
+        self.solver.collision.radius = self.contact.self_radius
+        self.pipeline = newton.CollisionPipeline(self.model, soft_contact_gap=self.contact.gap)
+        self.contacts = self.pipeline.contacts()
+        self.state_0 = self.model.state()
+        self.state_1 = self.model.state()
+        self.control = self.model.control()
+        self._body_wp = self._body_mesh.mesh  # the wp.Mesh the collision pipeline queries
+        self.body_vertices = body0.copy()
+
+    @property
+    def points(self) -> np.ndarray:
+        """``(N, 3)`` float32 current garment vertices (m)."""
+        return self.state_0.particle_q.numpy().copy()
+
+    def body_distance(self) -> np.ndarray:
+        """``(N,)`` signed distance (m, negative inside) of the current garment vertices to the
+        body where the last ``step`` left it (exact closest point on the collider mesh)."""
+        return self._body_query.signed_distance(self._body_wp, self.state_0.particle_q)
+
+    def get_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """A snapshot ``(points, velocities, body_vertices)`` to ``set_state`` back to."""
+        return (
+            self.state_0.particle_q.numpy().copy(),
+            self.state_0.particle_qd.numpy().copy(),
+            self.body_vertices.copy(),
+        )
+
+    def set_state(self, snapshot: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
+        """Restore a ``get_state`` snapshot (garment positions, velocities and the body)."""
+        points, velocities, body = snapshot
+        self.state_0.particle_q.assign(points)
+        self.state_0.particle_qd.assign(velocities)
+        self.body_vertices = body.copy()
+        self._set_body(body, np.zeros_like(body))
+        self._cover_body(body)
+
+    def _set_body(self, vertices: np.ndarray, velocities: np.ndarray) -> None:
+        """Move the body collider: overwrite its Warp mesh and refit the mesh's BVH."""
+        self._body_wp.points.assign(vertices.astype(np.float32))
+        self._body_wp.velocities.assign(velocities.astype(np.float32))
+        self._body_wp.refit()
+
+    def _cover_body(self, *frames: np.ndarray) -> None:
+        """Set the body shape's broad-phase box (computed by Newton from the first vertices
+        only) to cover the given body frames, so the broad phase never culls the moving body."""
+        lower = self.model.shape_collision_aabb_lower.numpy()
+        upper = self.model.shape_collision_aabb_upper.numpy()
+        lower[self._body_shape] = np.min([f.min(axis=0) for f in frames], axis=0) - AABB_PAD
+        upper[self._body_shape] = np.max([f.max(axis=0) for f in frames], axis=0) + AABB_PAD
+        self.model.shape_collision_aabb_lower.assign(lower)
+        self.model.shape_collision_aabb_upper.assign(upper)
+
+    def step(self, body_vertices_next: np.ndarray) -> np.ndarray:
+        """Advance one frame while the body moves linearly to ``body_vertices_next``.
+
+        Args:
+            body_vertices_next: ``(Vb, 3)`` body at the end of the frame (m).
+
+        Returns:
+            ``(N, 3)`` float32 garment vertices at the end of the frame (m).
+        """
+        target = np.asarray(body_vertices_next, dtype=np.float64)
+        if target.shape != self.body_vertices.shape:
+            raise ValueError(
+                f"body vertices must be {self.body_vertices.shape}, got {target.shape}"
+            )
+        start = self.body_vertices
+        velocity = (target - start) * self.fps
+        dt = 1.0 / (self.fps * self.substeps)
+        self._cover_body(start, target)
+        for sub in range(self.substeps):
+            alpha = (sub + 1) / self.substeps
+            self._set_body(start + alpha * (target - start), velocity)
+            self.pipeline.collide(self.state_0, self.contacts)
+            self.state_0.clear_forces()
+            self.solver.step(self.state_0, self.state_1, self.control, self.contacts, dt)
+            self.state_0, self.state_1 = self.state_1, self.state_0
+        self.body_vertices = target
+        return self.points
+
+
+def _points(values: np.ndarray, name: str) -> np.ndarray:
+    array = np.asarray(values, dtype=np.float64)
+    if array.ndim != 2 or array.shape[1] != 3 or len(array) == 0:
+        raise ValueError(f"{name} must be an (N, 3) array, got shape {array.shape}")
+    if not np.isfinite(array).all():
+        raise ValueError(f"{name} has non-finite values")
+    return array
+
+
+def _faces(values: np.ndarray, count: int, name: str) -> np.ndarray:
+    array = np.asarray(values)
+    if array.ndim != 2 or array.shape[1] != 3 or len(array) == 0:
+        raise ValueError(f"{name} must be an (F, 3) array, got shape {array.shape}")
+    if not np.issubdtype(array.dtype, np.integer) or array.min() < 0 or array.max() >= count:
+        raise ValueError(f"{name} must hold vertex indices in [0, {count})")
+    return array.astype(np.int64)
+
+
+@dataclass
+class SimResult:
+    """A simulated sequence and how far it can be trusted.
+
+    Attributes:
+        points: ``(T', N, 3)`` float32 garment vertices of the motion frames that passed their
+            checks (m); ``T' = T`` when ``ok``, otherwise the frames before the failure.
+        checks: one ``FrameCheck`` per frame in ``points``, plus the failing frame's last try.
+        substeps: substeps each frame of ``checks`` needed (more than asked after a retry).
+        seconds_per_frame: mean wall time per simulated frame (lead-in included, checks and
+            retries included), in seconds.
+        status: ``"ok"`` or ``"failed"``.
+        message: why it failed (empty when ``ok``).
+    """
+
+    points: np.ndarray
+    checks: list[FrameCheck] = field(default_factory=list)
+    substeps: list[int] = field(default_factory=list)
+    seconds_per_frame: float = 0.0
+    status: str = "ok"
+    message: str = ""
+
+    @property
+    def ok(self) -> bool:
+        """Whether every frame passed its checks."""
+        return self.status == "ok"
+
+
+def lead_in_frames(body_rest: np.ndarray, body_first: np.ndarray, count: int) -> np.ndarray:
+    """Body frames easing from the rest pose into the first frame of a motion.
+
+    Vertices are blended with a smoothstep weight, so the body starts and ends at rest speed.
+    Blending vertices shrinks limbs that rotate far (a T-pose arm lowered by 90°); callers
+    with a body model should rather interpolate the pose and skin each frame.
+
+    Args:
+        body_rest: ``(Vb, 3)`` body in the pose the garment's rest shape fits (m).
+        body_first: ``(Vb, 3)`` first frame of the motion (m).
+        count: number of frames to return.
+
+    Returns:
+        ``(count, Vb, 3)`` frames; the last one equals ``body_first``.
+    """
+    s = np.arange(1, count + 1) / max(count, 1)
+    weight = (s * s * (3.0 - 2.0 * s))[:, None, None]
+    return (1.0 - weight) * body_rest[None] + weight * body_first[None]
+
+
+def simulate_sequence(
+    rest_vertices: np.ndarray,
+    faces: np.ndarray,
+    body_faces: np.ndarray,
+    body_frames: np.ndarray,
+    *,
+    body_rest: np.ndarray | None = None,
+    lead_in: np.ndarray | int = 10,
+    settle_frames: int = 5,
+    material: ClothMaterial | None = None,
+    substeps: int = 4,
+    iterations: int = 4,
+    fps: float = 30.0,
+    contact: ContactSettings | None = None,
+    limits: CheckLimits | None = None,
+    max_substeps: int = 16,
+    progress: Callable[[int, int], None] | None = None,
+) -> SimResult:
+    """Simulate a garment through a body motion, checking every frame.
+
+    The garment starts in its rest shape on ``body_rest`` (the body it was modelled on). The
+    body then eases into ``body_frames[0]`` over the lead-in, holds it for ``settle_frames``
+    so the cloth settles, and plays the motion. A frame that fails its checks (see
+    ``CheckLimits``) is simulated again from the state before it with twice the substeps, up
+    to ``max_substeps``; if it still fails, the sequence stops there with status "failed".
+
+    Args:
+        rest_vertices: ``(N, 3)`` garment rest shape (m), worn by ``body_rest``.
+        faces: ``(F, 3)`` garment triangles.
+        body_faces: ``(Fb, 3)`` body triangles, counter-clockwise seen from outside.
+        body_frames: ``(T, Vb, 3)`` posed body vertices per frame (m) at ``fps``.
+        body_rest: ``(Vb, 3)`` body the garment fits at rest; ``body_frames[0]`` by default
+            (then there is no lead-in).
+        lead_in: ``(W, Vb, 3)`` body frames from ``body_rest`` to ``body_frames[0]``, or a
+            frame count for ``lead_in_frames``.
+        settle_frames: frames holding ``body_frames[0]`` before the motion.
+        material: the fabric; SNUG's cotton by default.
+        substeps: solver steps per frame (doubled on retries).
+        iterations: non-linear iterations per solver step.
+        fps: frames per second of ``body_frames``.
+        contact: contact parameters; ``ContactSettings()`` by default.
+        limits: what makes a frame bad; ``CheckLimits()`` by default.
+        max_substeps: most substeps a retried frame may use.
+        progress: called as ``progress(done, total)`` after each simulated frame.
+
+    Returns:
+        The ``SimResult``; check ``ok`` before using ``points``.
+    """
+    body_frames = np.asarray(body_frames, dtype=np.float64)
+    if body_frames.ndim != 3 or body_frames.shape[2] != 3 or len(body_frames) == 0:
+        raise ValueError(f"body_frames must be a (T, Vb, 3) array, got {body_frames.shape}")
+    start_body = body_frames[0] if body_rest is None else _points(body_rest, "body_rest")
+    if start_body.shape != body_frames.shape[1:]:
+        raise ValueError(f"body_rest must be {body_frames.shape[1:]}, got {start_body.shape}")
+    if isinstance(lead_in, (int, np.integer)):
+        count = int(lead_in) if body_rest is not None else 0
+        lead = lead_in_frames(start_body, body_frames[0], count)
+    else:
+        lead = np.asarray(lead_in, dtype=np.float64).reshape(-1, *body_frames.shape[1:])
+    warmup = np.concatenate([lead, np.repeat(body_frames[:1], settle_frames, axis=0)])
+    limits = limits or CheckLimits()
+
+    sim = GarmentSimulator(
+        rest_vertices, faces, body_faces, start_body, material,
+        substeps=substeps, iterations=iterations, fps=fps, contact=contact,
+    )  # fmt: skip
+    edges = unique_edges(np.asarray(faces))
+    rest = np.asarray(rest_vertices, dtype=np.float64)
+    rest_lengths = np.linalg.norm(rest[edges[:, 0]] - rest[edges[:, 1]], axis=1)
+
+    result = SimResult(points=np.zeros((0, sim.num_vertices, 3), dtype=np.float32))
+    frames: list[np.ndarray] = []
+    total = len(warmup) + len(body_frames)
+    started = time.perf_counter()
+    for index, body in enumerate(np.concatenate([warmup, body_frames])):
+        snapshot = sim.get_state()
+        tries = substeps
+        while True:
+            sim.substeps = tries
+            points = sim.step(body)
+            check = check_frame(points, sim.body_distance(), rest_lengths, edges, limits)
+            reasons = check.failures(limits)
+            if not reasons or tries * 2 > max_substeps:
+                break
+            sim.set_state(snapshot)
+            tries *= 2
+        sim.substeps = substeps
+        in_motion = index >= len(warmup)
+        if in_motion or reasons:
+            result.checks.append(check)
+            result.substeps.append(tries)
+        if reasons:
+            stage = f"motion frame {index - len(warmup)}" if in_motion else f"lead-in frame {index}"
+            result.status = "failed"
+            result.message = f"{stage}: {', '.join(reasons)} (with {tries} substeps)"
+            break
+        if in_motion:
+            frames.append(points)
+        if progress is not None:
+            progress(index + 1, total)
+    result.seconds_per_frame = (time.perf_counter() - started) / (index + 1)
+    if frames:
+        result.points = np.stack(frames).astype(np.float32)
+    return result
