@@ -10,7 +10,7 @@ import click
 from usd_garment.body.io import BodyModelError
 
 #: Library exceptions that mean bad input rather than a bug.
-USER_ERRORS: tuple[type[Exception], ...] = (BodyModelError, ValueError, FileNotFoundError)
+USER_ERRORS: tuple[type[Exception], ...] = (BodyModelError, ValueError, OSError)
 
 
 @contextmanager

@@ -7,6 +7,8 @@ import click
 from usd_garment import __version__
 from usd_garment.cli.amass import export_amass, import_amass
 from usd_garment.cli.body import body
+from usd_garment.cli.dress import dress
+from usd_garment.cli.evaluate import evaluate
 from usd_garment.cli.garment import garment
 
 
@@ -20,3 +22,5 @@ main.add_command(body)
 main.add_command(garment)
 main.add_command(import_amass)
 main.add_command(export_amass)
+main.add_command(dress)
+main.add_command(evaluate)

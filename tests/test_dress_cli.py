@@ -1,0 +1,115 @@
+"""``usd-garment dress`` and ``eval`` from the command line: a JSON summary on stdout, and bad
+input or output giving one line of error, a non-zero exit, no output file and an untouched input."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from tests.dress_helpers import random_motion
+from usd_garment.body.model import BodyModel
+from usd_garment.cli.main import main
+from usd_garment.usd.body_layer import write_body_layer
+
+BAD_INPUTS = sorted((Path(__file__).parent / "data" / "bad").glob("*.usd*"))
+
+
+@pytest.fixture
+def body_layer(tmp_path: Path, body_model: BodyModel) -> Path:
+    path = tmp_path / "in" / "body.usda"
+    path.parent.mkdir()
+    write_body_layer(path, random_motion(frames=6), body_model)
+    return path
+
+
+def _run(args: list[str]) -> tuple[int, str, str]:
+    result = CliRunner().invoke(main, [str(a) for a in args])
+    assert not isinstance(result.exception, AssertionError)
+    return result.exit_code, result.stdout, result.stderr
+
+
+def test_dress_json_summary_and_eval(body_layer: Path, tmp_path: Path) -> None:
+    out = tmp_path / "tshirt.usdc"
+    code, stdout, _ = _run(["dress", body_layer, "-o", out, "--frames", "1:5", "--lod", "low",
+                            "--root-layer", tmp_path / "root.usda", "--json"])  # fmt: skip
+    assert code == 0, stdout
+    summary = json.loads(stdout)
+    assert summary["frames"] == 4
+    assert summary["method"] == "lbs" and summary["garment"] == "tshirt"
+    assert set(summary["seconds"]) == {"read", "compute", "write"}
+    assert summary["outputs"] == [str(out), str(tmp_path / "root.usda")]
+    assert out.is_file()
+
+    code, stdout, _ = _run(["eval", out, "--body", body_layer, "--reference", out, "--json"])
+    assert code == 0, stdout
+    report = json.loads(stdout)
+    assert report["time_codes"] == [1.0, 2.0, 3.0, 4.0]
+    assert report["summary"]["reference_mm"] == 0.0
+    assert report["summary"]["nan_count"] == 0
+    assert len(report["per_frame"]["inside_share"]) == 4
+
+    code, stdout, _ = _run(["eval", out, "--body", body_layer])
+    assert code == 0 and "vertices inside the body" in stdout
+
+
+def _assert_clean_failure(args: list[str], folder: Path, source: Path | None) -> str:
+    before = {p: p.read_bytes() for p in folder.rglob("*") if p.is_file()}
+    digest = hashlib.sha256(source.read_bytes()).hexdigest() if source and source.exists() else None
+    code, stdout, stderr = _run(args)
+    assert code != 0
+    message = stderr.strip()
+    assert message.startswith("Error:") and "\n" not in message, message
+    assert "Traceback" not in stdout + stderr
+    assert {p: p.read_bytes() for p in folder.rglob("*") if p.is_file()} == before
+    if digest is not None:
+        assert hashlib.sha256(source.read_bytes()).hexdigest() == digest
+    return message
+
+
+@pytest.mark.parametrize("bad", BAD_INPUTS, ids=lambda p: p.name)
+def test_bad_input_files(bad: Path, tmp_path: Path) -> None:
+    source = tmp_path / bad.name
+    shutil.copy(bad, source)
+    _assert_clean_failure(["dress", source, "-o", tmp_path / "g.usdc"], tmp_path, source)
+
+
+def test_bad_corpus_is_there() -> None:
+    assert len(BAD_INPUTS) >= 5
+
+
+@pytest.mark.parametrize(
+    ("extra", "expected"),
+    [
+        (["-o", "{dir}/missing/g.usdc"], "does not exist"),
+        (["-o", "{input}"], "overwrite the input"),
+        (["-o", "{dir}/in/../in/body.usda"], "overwrite the input"),
+        (["-o", "{dir}/g.obj"], ".usdc"),
+        (["-o", "{dir}/g.usdc", "--method", "magic"], "unknown method"),
+        (["-o", "{dir}/g.usdc", "--garment", "hat"], "unknown garment"),
+        (["-o", "{dir}/g.usdc", "--frames", "0:999"], "frames"),
+        (["-o", "{dir}/g.usdc", "--skeleton", "/Nope"], "/Nope"),
+        (["-o", "{dir}/g.usdc", "--root-layer", "{input}"], "overwrite the input"),
+        (["-o", "{dir}/g.usdc", "--body-model", "{dir}/none.npz"], "none.npz"),
+    ],
+)
+def test_bad_arguments(body_layer: Path, tmp_path: Path, extra: list[str], expected: str) -> None:
+    args = ["dress", body_layer] + [a.format(dir=tmp_path, input=body_layer) for a in extra]
+    message = _assert_clean_failure(args, tmp_path, body_layer)
+    assert expected in message
+
+
+def test_missing_input(tmp_path: Path) -> None:
+    message = _assert_clean_failure(
+        ["dress", tmp_path / "none.usda", "-o", tmp_path / "g.usdc"], tmp_path, None
+    )
+    assert "none.usda" in message
+
+
+def test_eval_bad_layer(body_layer: Path, tmp_path: Path) -> None:
+    message = _assert_clean_failure(["eval", body_layer, "--body", body_layer], tmp_path, None)
+    assert "garment" in message

@@ -1,0 +1,131 @@
+"""Collision query and metrics: the signed distance against trimesh, the push-out baseline leaving
+no vertex inside the body where plain skinning has some, and ``eval`` agreeing with both."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+import trimesh
+
+from tests.dress_helpers import random_motion, strong_motion, torso_template
+from usd_garment.body.model import BodyModel
+from usd_garment.dress import dress
+from usd_garment.eval.body_distance import BodySurface, signed_distance
+from usd_garment.eval.evaluate import evaluate_layer, posed_body_vertices
+from usd_garment.eval.metrics import evaluate_garment
+from usd_garment.methods import available_methods, get_method
+from usd_garment.methods.postprocess import PUSH_OUT_EPS
+from usd_garment.usd.body_layer import write_body_layer
+
+
+@pytest.fixture(scope="module")
+def closed_body(body_model: BodyModel) -> BodyModel:
+    mesh = trimesh.Trimesh(body_model.v_template.numpy(), body_model.faces.numpy(), process=False)
+    if not mesh.is_watertight:
+        pytest.skip("collision tests need the closed default body")
+    return body_model
+
+
+def test_signed_distance_matches_trimesh(closed_body: BodyModel) -> None:
+    motion = random_motion(frames=2, seed=1)
+    motion.pose *= 0.3  # mild, so the posed body does not intersect itself
+    verts = posed_body_vertices(closed_body, motion)
+    faces = closed_body.faces.numpy()
+    rng = np.random.default_rng(0)
+    idx = rng.integers(0, verts.shape[1], size=(2, 400))
+    points = np.take_along_axis(verts, idx[..., None], axis=1) + rng.normal(0, 0.01, (2, 400, 3))
+    result = signed_distance(points, verts, BodySurface(faces, verts.shape[1]))
+    for t in range(2):
+        mesh = trimesh.Trimesh(verts[t], faces, process=False)
+        reference = -trimesh.proximity.signed_distance(mesh, points[t])  # trimesh: inside > 0
+        np.testing.assert_allclose(result.distance[t], reference, atol=2e-5)
+        on_surface = np.abs(mesh.nearest.on_surface(result.closest[t])[1])
+        assert on_surface.max() < 1e-5
+
+
+def test_push_out_removes_the_penetrations_of_skinning(closed_body: BodyModel) -> None:
+    template = torso_template(closed_body)
+    motion = strong_motion()
+    verts = posed_body_vertices(closed_body, motion)
+    faces = closed_body.faces.numpy()
+    plain = get_method("lbs").predict(motion, closed_body, template)
+    pushed = get_method("lbs+postprocess").predict(motion, closed_body, template)
+    before = evaluate_garment(plain, verts, faces, motion.fps)
+    after = evaluate_garment(pushed, verts, faces, motion.fps)
+    assert before.inside_share.max() > 0.001
+    assert before.max_penetration_mm.max() > 0.5
+    assert after.inside_share.max() == 0.0
+    assert after.max_penetration_mm.max() == 0.0
+    moved = np.linalg.norm(pushed - plain, axis=-1) > 0
+    d = signed_distance(plain, verts, BodySurface(faces, verts.shape[1])).distance
+    assert not moved[d > PUSH_OUT_EPS].any()  # only vertices nearer than ε move
+    assert moved[d < 0].all()
+
+
+def test_eval_of_written_layers_agrees_with_the_metrics(
+    closed_body: BodyModel, tmp_path: Path
+) -> None:
+    template = torso_template(closed_body)
+    motion = strong_motion(frames=8)
+    source = tmp_path / "body.usda"
+    write_body_layer(source, motion, closed_body)
+    layers = {}
+    for method in ("lbs", "lbs+postprocess"):
+        layers[method] = tmp_path / f"{method}.usdc"
+        dress(source, layers[method], method=method, template=template)
+    plain, _ = evaluate_layer(layers["lbs"], source, reference=layers["lbs+postprocess"])
+    pushed, codes = evaluate_layer(layers["lbs+postprocess"], source)
+    np.testing.assert_array_equal(codes, motion.time_codes)
+
+    verts = posed_body_vertices(closed_body, motion)
+    direct = {m: get_method(m).predict(motion, closed_body, template) for m in layers}
+    expected = evaluate_garment(direct["lbs"], verts, closed_body.faces.numpy(), motion.fps)
+    np.testing.assert_allclose(
+        plain.inside_share, expected.inside_share, atol=2 / len(template.vertices)
+    )
+    assert plain.summary()["inside_share"] > 0.0
+    assert pushed.summary()["inside_share"] == 0.0
+    shift_mm = 1e3 * np.linalg.norm(direct["lbs"] - direct["lbs+postprocess"], axis=-1).mean(1)
+    np.testing.assert_allclose(plain.reference_mm, shift_mm, atol=1e-3)
+    assert np.isnan(pushed.reference_mm).all()
+
+
+def test_metrics_jitter_and_nans() -> None:
+    body = trimesh.creation.icosphere(subdivisions=3, radius=0.1)
+    t, fps = 6, 30.0
+    verts = np.repeat(body.vertices[None], t, axis=0)
+    times = np.arange(t) / fps
+    points = np.repeat(body.vertices[None] * 2.0, t, axis=0)
+    points[..., 0] += 0.5 * 3.0 * times[:, None] ** 2  # constant acceleration 3 m/s² along x
+    points[2, 5] = np.nan
+    points[:, 7] = 0.0  # the sphere's centre: inside, 100 mm deep
+    m = evaluate_garment(points, verts, body.faces, fps)
+    np.testing.assert_array_equal(m.nan_count, [0, 0, 1, 0, 0, 0])
+    n = len(body.vertices)
+    # Vertex 7 stands still; vertex 5 is left out of the frames next to its NaN (1 to 3).
+    moving = [(n - 2) / (n - 1)] * 3 + [(n - 1) / n]
+    np.testing.assert_allclose(m.acceleration[1:-1], 3.0 * np.array(moving), rtol=1e-6)
+    assert np.isnan(m.acceleration[[0, -1]]).all()
+    np.testing.assert_allclose(m.inside_share, [1 / n, 1 / n, 1 / (n - 1), 1 / n, 1 / n, 1 / n])
+    np.testing.assert_allclose(m.max_penetration_mm, 100.0, rtol=0.05)
+    assert m.summary()["nan_count"] == 1
+    assert m.to_json()["per_frame"]["acceleration"][0] is None
+
+
+def test_methods_registry() -> None:
+    assert {"lbs", "lbs+postprocess"} <= set(available_methods())
+    with pytest.raises(ValueError, match="unknown method"):
+        get_method("nope")
+
+
+def test_lbs_follows_the_body_under_shape_and_translation(closed_body: BodyModel) -> None:
+    template = torso_template(closed_body, offset=0.0)
+    motion = random_motion(frames=3, seed=2)
+    points = get_method("lbs").predict(motion, closed_body, template)
+    verts = posed_body_vertices(closed_body, motion)
+    # A zero-offset garment cut from the body follows its vertices exactly (same weights/shape).
+    index = torch.cdist(torch.from_numpy(template.vertices), closed_body.v_template).argmin(1)
+    np.testing.assert_allclose(points, verts[:, index.numpy()], atol=1e-5)

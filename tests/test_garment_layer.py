@@ -1,0 +1,231 @@
+"""The garment layer: AMASS → body layer → dress → a layer that composes over the input, validates,
+reads back what was written (value clips too), and lands in the same place whatever the rig."""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from click.testing import CliRunner
+from pxr import Gf, Sdf, Usd, UsdGeom
+
+from tests.dress_helpers import random_motion, torso_template
+from tests.rigs import RigStyle, write_rig
+from usd_garment.body.measure import heights
+from usd_garment.body.model import BodyModel
+from usd_garment.cli.main import main
+from usd_garment.dress import dress
+from usd_garment.methods import get_method
+from usd_garment.usd import garment_layer
+from usd_garment.usd.body_layer import write_body_layer
+from usd_garment.usd.garment_read import read_garment_layer
+from usd_garment.usd.read import read_smpl_motion
+from usd_garment.usd.stage import canonical_to_world_matrix
+from usd_garment.usd.validate import validate_layer
+
+
+def _digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+@pytest.fixture
+def amass_layer(tmp_path: Path, body_model: BodyModel) -> Path:
+    """An AMASS-like npz (Z-up, SMPL-H poses, 60 fps) imported as a USD body layer."""
+    rng = np.random.default_rng(3)
+    t = 12
+    poses = np.zeros((t, 156))
+    poses[:, :3] = [np.pi / 2, 0.0, 0.0]  # AMASS is Z-up: stand the body up
+    poses[:, 3:66] = 0.3 * np.sin(np.linspace(0, 3, t))[:, None] * rng.normal(size=63)
+    trans = np.zeros((t, 3))
+    trans[:, 1] = np.linspace(0.0, 0.6, t)
+    trans[:, 2] = 0.9
+    npz = tmp_path / "walk.npz"
+    np.savez(npz, poses=poses, trans=trans, betas=0.5 * rng.normal(size=16), gender="neutral",
+             mocap_framerate=60.0)  # fmt: skip
+    out = tmp_path / "walk.usda"
+    result = CliRunner().invoke(main, ["import-amass", str(npz), "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    return out
+
+
+def _bounds(stage: Usd.Stage, path: str, time: float) -> Gf.Range3d:
+    cache = UsdGeom.BBoxCache(Usd.TimeCode(time), [UsdGeom.Tokens.default_])
+    return cache.ComputeWorldBound(stage.GetPrimAtPath(path)).ComputeAlignedRange()
+
+
+def test_round_trip_composes_validates_and_reads_back(
+    amass_layer: Path, tmp_path: Path, body_model: BodyModel
+) -> None:
+    template = torso_template(body_model)
+    before = _digest(amass_layer)
+    out, root = tmp_path / "tshirt.usdc", tmp_path / "shot.usda"
+    result = dress(amass_layer, out, template=template, root_layer=root)
+    assert result.outputs == [out, root]
+    assert _digest(amass_layer) == before
+    assert validate_layer(out) == []
+    assert validate_layer(root) == []
+
+    motion, info = read_smpl_motion(amass_layer, body_model)
+    expected = get_method("lbs").predict(motion, body_model, template)
+    points, faces, ginfo = read_garment_layer(out)
+    np.testing.assert_allclose(points, expected, atol=2e-6)
+    np.testing.assert_array_equal(faces, template.faces)
+    np.testing.assert_array_equal(ginfo.time_codes, motion.time_codes)
+
+    layer = Sdf.Layer.FindOrOpen(str(out))
+    source = Usd.Stage.Open(str(amass_layer))
+    assert layer.defaultPrim == source.GetDefaultPrim().GetName()
+    assert layer.timeCodesPerSecond == source.GetTimeCodesPerSecond()
+    assert (layer.startTimeCode, layer.endTimeCode) == (
+        source.GetStartTimeCode(),
+        source.GetEndTimeCode(),
+    )
+
+    stage = Usd.Stage.Open(str(root))
+    assert UsdGeom.GetStageUpAxis(stage) == UsdGeom.GetStageUpAxis(source)
+    mesh_path = str(Path(info.skel_root).parent / "Garments" / template.name)
+    prim = stage.GetPrimAtPath(mesh_path)
+    assert prim.IsDefined() and prim.IsA(UsdGeom.Mesh)
+    assert not prim.GetPath().HasPrefix(info.skel_root)
+    assert "GarmentAPI" in prim.GetAppliedSchemas()
+    assert prim.GetAttribute("garment:method").Get() == "lbs"
+    assert [str(p) for p in prim.GetRelationship("garment:body").GetTargets()] == [info.skeleton]
+    mesh = UsdGeom.Mesh(prim)
+    assert mesh.GetSubdivisionSchemeAttr().Get() == "none"
+    assert mesh.GetNormalsInterpolation() == UsdGeom.Tokens.vertex
+    assert len(mesh.GetNormalsAttr().Get(motion.time_codes[3])) == len(template.vertices)
+    uv = UsdGeom.PrimvarsAPI(prim).GetPrimvar("st")
+    assert uv.GetInterpolation() == UsdGeom.Tokens.vertex
+    assert len(mesh.GetExtentAttr().GetTimeSamples()) == motion.num_frames
+
+    t = float(motion.time_codes[5])
+    body_box = _bounds(stage, info.skel_root, t)
+    garment_box = _bounds(stage, mesh_path, t)
+    whole = _bounds(stage, "/", t)
+    for box in (body_box, garment_box):
+        assert not box.IsEmpty()
+        assert whole.Contains(box)
+    # The garment (a torso top) sits inside the body's box, in the same place.
+    assert body_box.Contains(garment_box)
+
+
+def test_value_clips_read_back_as_the_plain_layer(
+    amass_layer: Path, tmp_path: Path, body_model: BodyModel
+) -> None:
+    template = torso_template(body_model)
+    plain, clipped = tmp_path / "plain.usda", tmp_path / "clipped.usd"
+    dress(amass_layer, plain, template=template)
+    result = dress(
+        amass_layer, clipped, template=template, clip_threshold=10, root_layer=tmp_path / "r.usda"
+    )
+    clip_dir = tmp_path / "clipped.clips"
+    assert result.outputs == [clipped, clip_dir, tmp_path / "r.usda"]
+    assert sorted(p.name for p in clip_dir.iterdir()) == [
+        "clip_0000.usdc",
+        "manifest.usda",
+        "topology.usdc",
+    ]
+    assert validate_layer(clipped) == []
+    assert validate_layer(tmp_path / "r.usda") == []
+    a, fa, ia = read_garment_layer(plain)
+    b, fb, ib = read_garment_layer(clipped)
+    np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(fa, fb)
+    np.testing.assert_array_equal(ia.time_codes, ib.time_codes)
+
+
+def test_several_clips_and_relative_paths(tmp_path: Path, body_model: BodyModel) -> None:
+    motion = random_motion(frames=7)
+    source = tmp_path / "in" / "body.usda"
+    source.parent.mkdir()
+    write_body_layer(source, motion, body_model, with_mesh=False)
+    _, info = read_smpl_motion(source, body_model)
+    frames = garment_layer.GarmentFrames(
+        "tshirt", "tshirt", np.array([[0, 1, 2]]), np.zeros((3, 2)),
+        np.random.default_rng(0).normal(size=(7, 3, 3)), "lbs", "m", "1", body_model.name,
+    )  # fmt: skip
+    out = tmp_path / "out" / "g.usdc"
+    out.parent.mkdir()
+    garment_layer.write_garment_layer(
+        out, info, [frames], motion.time_codes, clip_threshold=1, clip_frames=3,
+        root_layer=tmp_path / "root.usda",
+    )  # fmt: skip
+    assert len(list((tmp_path / "out" / "g.clips").glob("clip_*.usdc"))) == 3
+    text = Sdf.Layer.FindOrOpen(str(tmp_path / "root.usda")).ExportToString()
+    assert "./out/g.usdc" in text and "./in/body.usda" in text
+    points, _, _ = read_garment_layer(out)
+    np.testing.assert_allclose(points, frames.points, atol=1e-6)
+
+
+def test_failed_write_leaves_no_files(
+    amass_layer: Path, tmp_path: Path, body_model: BodyModel, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    template = torso_template(body_model)
+    before = set(tmp_path.iterdir())
+    calls = []
+
+    def failing_export(layer, path):
+        calls.append(path)
+        if len(calls) == 3:
+            raise OSError("disk full")
+        layer.Export(str(path))
+
+    monkeypatch.setattr(garment_layer, "_export", failing_export)
+    with pytest.raises(OSError, match="disk full"):
+        dress(amass_layer, tmp_path / "g.usdc", template=template, clip_threshold=10,
+              root_layer=tmp_path / "root.usda")  # fmt: skip
+    assert set(tmp_path.iterdir()) == before
+
+
+def _rig_garment(
+    tmp_path: Path, name: str, motion, body: BodyModel, style: RigStyle, template
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Dress a rig whose ``/World`` (an ancestor of the SkelRoot and of the garments) is moved
+    by 3 m, -1 m, 2 m and turned 30° about up, in the rig's axes and units. Returns canonical
+    points, world points (composed over the rig) and the stage's canonical-to-world matrix."""
+    rig = tmp_path / f"{name}.usda"
+    out, root = tmp_path / f"{name}_g.usdc", tmp_path / f"{name}_r.usda"
+    write_rig(rig, motion, body, style)
+    stage = Usd.Stage.Open(str(rig))
+    to_stage = canonical_to_world_matrix(style.up_axis, style.meters_per_unit)
+    xform = UsdGeom.Xformable(stage.GetPrimAtPath("/World"))
+    xform.AddTranslateOp().Set(Gf.Vec3d(*(np.array([3.0, -1.0, 2.0]) @ to_stage[:3, :3])))
+    if style.up_axis == "Y":
+        xform.AddRotateYOp().Set(30.0)
+    else:
+        xform.AddRotateZOp().Set(30.0)
+    stage.Save()
+    dress(rig, out, template=template, root_layer=root)
+    canonical, _, info = read_garment_layer(out)
+    composed = Usd.Stage.Open(str(root))
+    mesh = composed.GetPrimAtPath(info.mesh)
+    world = []
+    for t in info.time_codes.tolist():
+        local = np.asarray(UsdGeom.Mesh(mesh).GetPointsAttr().Get(t), dtype=np.float64)
+        m = np.asarray(UsdGeom.XformCache(t).GetLocalToWorldTransform(mesh))
+        world.append(local @ m[:3, :3] + m[3, :3])
+    return canonical, np.stack(world), to_stage
+
+
+def test_unusual_rigs_give_the_same_garment(tmp_path: Path, body_model: BodyModel) -> None:
+    motion = random_motion(frames=6, fps=24.0)
+    template = torso_template(body_model)
+    tol = 1e-4 * float(heights(body_model, torch.zeros(1, 10))[0])
+    plain, plain_world, _ = _rig_garment(
+        tmp_path, "plain", motion, body_model, RigStyle(), template
+    )
+    np.testing.assert_allclose(plain_world, plain, atol=tol)
+    odd = dict(up_axis="Z", meters_per_unit=0.01, orient_seed=4, shuffle_seed=5, fingers=True,
+               prefix="m_avg_", short_names=True)  # fmt: skip
+    for name, step in (("odd24", 1), ("odd120", 5)):
+        style = RigStyle(step=step, **odd)
+        canonical, world, to_stage = _rig_garment(
+            tmp_path, name, motion, body_model, style, template
+        )
+        assert len(canonical) == (len(plain) - 1) * step + 1
+        np.testing.assert_allclose(canonical[::step], plain, atol=tol)
+        # The mesh lands at the same place in the stage's world, whatever /World's transform.
+        np.testing.assert_allclose(world, canonical @ to_stage[:3, :3], atol=tol * 100)

@@ -1,0 +1,9 @@
+"""Garment methods: one interface (:class:`GarmentMethod`), a registry, and the baselines."""
+
+from usd_garment.methods.base import GarmentMethod, available_methods, get_method, register_method
+from usd_garment.methods.lbs import LbsMethod, LbsPushOutMethod
+
+register_method(LbsMethod.name, LbsMethod)
+register_method(LbsPushOutMethod.name, LbsPushOutMethod)
+
+__all__ = ["GarmentMethod", "available_methods", "get_method", "register_method"]

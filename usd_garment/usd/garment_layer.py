@@ -1,0 +1,421 @@
+"""Write posed garments as a new USD layer: one time-sampled ``UsdGeom.Mesh`` per garment beside
+the body's SkelRoot, in the input stage's units, axes and timing, as one file or as value clips.
+
+Layout. For a SkelRoot ``/Char/Body`` the garments go to ``/Char/Garments/<name>``: existing
+ancestors (``/Char``) are ``over``s, new prims (``Garments``, the meshes) are ``def``s. For a
+SkelRoot at the root of the stage (``/Body``) they go to ``/Garments/<name>``, a root prim of
+their own, so nothing is ever authored inside the SkelRoot; the layer's defaultPrim is the root
+prim that holds the garments.
+
+Value clips. Past ``clip_threshold`` frames × vertices, ``out.usdc`` holds the static hierarchy
+and the clip metadata, and the folder ``out.clips/`` holds ``topology.usdc`` (sublayered: meshes
+with their topology, UVs and GarmentAPI), ``manifest.usda`` and ``clip_0000.usdc``… with the
+time samples of points, normals and extent for a chunk of frames each. Asset paths are relative.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from pxr import Gf, Sdf, Usd, UsdGeom, Vt
+from scipy import sparse
+
+from usd_garment.atomic import atomic_output
+from usd_garment.usd.read import StageInfo
+from usd_garment.usd.schema import apply_garment
+
+#: Frames × vertices above which the time samples go to value clips.
+CLIP_THRESHOLD = 8_000_000
+#: Frames per value-clip file.
+CLIP_FRAMES = 250
+#: Frames whose normals are computed at once (bounds memory).
+FRAMES_PER_CHUNK = 64
+#: Output suffixes; ``.usd`` is written as binary crate, like ``.usdc``.
+LAYER_SUFFIXES = (".usdc", ".usda", ".usd")
+#: customData key on each mesh: the matrix taking canonical points to the mesh's local space.
+CANONICAL_TO_LOCAL_KEY = "usdGarment:canonicalToLocal"
+GARMENT_SCOPE = "Garments"
+#: File names inside the value-clip folder.
+TOPOLOGY_NAME, MANIFEST_NAME, CLIP_NAME = "topology.usdc", "manifest.usda", "clip_{:04d}.usdc"
+
+
+@dataclass
+class GarmentFrames:
+    """One posed garment to write.
+
+    Attributes:
+        name: prim name of the mesh, e.g. ``"tshirt"``.
+        garment_type: the garment kind (``garment:type``), e.g. ``"tshirt"``.
+        faces: ``(F, 3)`` int triangles, counter-clockwise seen from outside.
+        uvs: ``(N, 2)`` float texture coordinates, per vertex.
+        points: ``(T, N, 3)`` posed points, canonical frame (Y-up, metres).
+        method: the method that posed it (``garment:method``).
+        model: model name (``garment:model``), e.g. the template or network name.
+        model_version: version of the model (``garment:modelVersion``).
+        body_model: the body model name it was fitted to (``garment:bodyModel``).
+        solver_settings: free-form settings string recorded as ``garment:solverSettings``.
+    """
+
+    name: str
+    garment_type: str
+    faces: np.ndarray
+    uvs: np.ndarray
+    points: np.ndarray
+    method: str
+    model: str
+    model_version: str
+    body_model: str
+    solver_settings: str = ""
+
+
+def garment_parent_path(info: StageInfo) -> Sdf.Path:
+    """Path of the prim that holds the garments: a ``Garments`` sibling of the SkelRoot."""
+    return Sdf.Path(info.skel_root).GetParentPath().AppendChild(GARMENT_SCOPE)
+
+
+def _parent_to_world(info: StageInfo, parent: Sdf.Path) -> tuple[np.ndarray, set[str]]:
+    """Local-to-world ``(4, 4)`` of the garment scope's parent in the input (at the start time)
+    and the paths of the input prims that exist (those get ``over``s)."""
+    stage = Usd.Stage.Open(str(info.path), Usd.Stage.LoadNone)
+    existing = {str(p) for p in parent.GetPrefixes() if stage.GetPrimAtPath(p)}
+    owner = stage.GetPrimAtPath(parent.GetParentPath())
+    matrix = np.eye(4)
+    if owner and not owner.IsPseudoRoot():
+        cache = UsdGeom.XformCache(Usd.TimeCode(info.start_time_code))
+        matrix = np.array(cache.GetLocalToWorldTransform(owner))
+    return matrix, existing
+
+
+def vertex_normals(points: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Area-weighted unit vertex normals ``(T, N, 3)`` float32 of meshes ``(T, N, 3)``."""
+    t, n = points.shape[:2]
+    tri = points[:, faces]  # (T, F, 3, 3)
+    face_n = np.cross(tri[:, :, 1] - tri[:, :, 0], tri[:, :, 2] - tri[:, :, 0])  # (T, F, 3)
+    f = len(faces)
+    incidence = sparse.csr_matrix(
+        (np.ones(3 * f, dtype=face_n.dtype), (faces.reshape(-1), np.repeat(np.arange(f), 3))),
+        shape=(n, f),
+    )
+    summed = incidence @ face_n.transpose(1, 0, 2).reshape(f, t * 3)  # (N, T*3)
+    normals = summed.reshape(n, t, 3).transpose(1, 0, 2)
+    length = np.linalg.norm(normals, axis=-1, keepdims=True)
+    return (normals / np.maximum(length, 1e-12)).astype(np.float32)
+
+
+def _set(
+    spec: Sdf.PrimSpec,
+    name: str,
+    type_name: Sdf.ValueTypeName,
+    value: object,
+    uniform: bool = False,
+) -> Sdf.AttributeSpec:
+    """An attribute spec on ``spec`` with ``value`` as its default (None: no default)."""
+    variability = Sdf.VariabilityUniform if uniform else Sdf.VariabilityVarying
+    attr = Sdf.AttributeSpec(spec, name, type_name, variability)
+    if value is not None:
+        attr.default = value
+    return attr
+
+
+def _define_hierarchy(
+    layer: Sdf.Layer, mesh_path: Sdf.Path, existing: set[str], define: bool
+) -> Sdf.PrimSpec:
+    """Prim specs down to ``mesh_path``: ``over`` for input prims, ``def`` for new ones when
+    ``define`` (else all ``over``). Returns the mesh's spec."""
+    spec = layer.pseudoRoot
+    for prefix in mesh_path.GetPrefixes():
+        child = layer.GetPrimAtPath(prefix)
+        if child is None:
+            is_new = define and str(prefix) not in existing
+            specifier = Sdf.SpecifierDef if is_new else Sdf.SpecifierOver
+            type_name = ""
+            if is_new:
+                type_name = "Mesh" if prefix == mesh_path else "Xform"
+            child = Sdf.PrimSpec(spec, prefix.name, specifier, type_name)
+        spec = child
+    return spec
+
+
+def _author_static(
+    layer: Sdf.Layer,
+    mesh_path: Sdf.Path,
+    garment: GarmentFrames,
+    faces: np.ndarray,
+    canonical_to_local: np.ndarray,
+    existing: set[str],
+) -> None:
+    """Topology, UVs, render settings and the canonical-frame record of one mesh."""
+    spec = _define_hierarchy(layer, mesh_path, existing, define=True)
+    counts = np.full(len(faces), 3, dtype=np.int32)
+    _set(spec, "faceVertexCounts", Sdf.ValueTypeNames.IntArray, Vt.IntArray.FromNumpy(counts))
+    indices = np.ascontiguousarray(faces.reshape(-1), dtype=np.int32)
+    _set(spec, "faceVertexIndices", Sdf.ValueTypeNames.IntArray, Vt.IntArray.FromNumpy(indices))
+    _set(spec, "subdivisionScheme", Sdf.ValueTypeNames.Token, "none", uniform=True)
+    _set(spec, "orientation", Sdf.ValueTypeNames.Token, "rightHanded", uniform=True)
+    _set(spec, "doubleSided", Sdf.ValueTypeNames.Bool, True, uniform=True)
+    uvs = Vt.Vec2fArray.FromNumpy(np.ascontiguousarray(garment.uvs, dtype=np.float32))
+    _set(spec, "primvars:st", Sdf.ValueTypeNames.TexCoord2fArray, uvs).SetInfo(
+        "interpolation", UsdGeom.Tokens.vertex
+    )
+    matrix = Gf.Matrix4d(*canonical_to_local.reshape(-1).tolist())
+    spec.SetInfo("customData", {CANONICAL_TO_LOCAL_KEY: matrix})
+    _set(spec, "normals", Sdf.ValueTypeNames.Normal3fArray, None).SetInfo(
+        "interpolation", UsdGeom.Tokens.vertex
+    )
+
+
+def _apply_garment_api(
+    layer: Sdf.Layer, parent: Sdf.Path, garments: list[GarmentFrames], info: StageInfo
+) -> None:
+    """``GarmentAPI`` with its values on every mesh of ``layer``; ``garment:body`` targets the
+    skeleton."""
+    stage = Usd.Stage.Open(layer)
+    for garment in garments:
+        apply_garment(
+            stage.GetPrimAtPath(parent.AppendChild(garment.name)),
+            garment_type=garment.garment_type,
+            method=garment.method,
+            model=garment.model,
+            model_version=garment.model_version,
+            body_model=garment.body_model,
+            body=info.skeleton,
+            solver_settings=garment.solver_settings,
+        )
+
+
+def _author_samples(
+    layer: Sdf.Layer,
+    mesh_path: Sdf.Path,
+    points: np.ndarray,
+    faces: np.ndarray,
+    time_codes: np.ndarray,
+) -> None:
+    """Time samples of points, normals and extent; ``points`` ``(T, N, 3)`` in local space."""
+    if layer.GetPrimAtPath(mesh_path) is None:
+        Sdf.CreatePrimInLayer(layer, mesh_path)
+    spec = layer.GetPrimAtPath(mesh_path)
+    for name, type_name in (
+        ("points", Sdf.ValueTypeNames.Point3fArray),
+        ("normals", Sdf.ValueTypeNames.Normal3fArray),
+        ("extent", Sdf.ValueTypeNames.Float3Array),
+    ):
+        if name not in spec.attributes:
+            Sdf.AttributeSpec(spec, name, type_name)
+    p_path, n_path = mesh_path.AppendProperty("points"), mesh_path.AppendProperty("normals")
+    e_path = mesh_path.AppendProperty("extent")
+    for s in range(0, len(time_codes), FRAMES_PER_CHUNK):
+        chunk = np.ascontiguousarray(points[s : s + FRAMES_PER_CHUNK], dtype=np.float32)
+        normals = vertex_normals(chunk, faces)
+        extent = np.stack([chunk.min(axis=1), chunk.max(axis=1)], axis=1)  # (t, 2, 3)
+        for i, t in enumerate(time_codes[s : s + FRAMES_PER_CHUNK].tolist()):
+            layer.SetTimeSample(p_path, t, Vt.Vec3fArray.FromNumpy(chunk[i]))
+            layer.SetTimeSample(n_path, t, Vt.Vec3fArray.FromNumpy(normals[i]))
+            layer.SetTimeSample(e_path, t, Vt.Vec3fArray.FromNumpy(extent[i]))
+
+
+def _new_layer(info: StageInfo, default_prim: str | None) -> Sdf.Layer:
+    layer = Sdf.Layer.CreateAnonymous()
+    layer.pseudoRoot.SetInfo("upAxis", info.up_axis)
+    layer.pseudoRoot.SetInfo("metersPerUnit", info.meters_per_unit)
+    layer.timeCodesPerSecond = info.time_codes_per_second
+    layer.framesPerSecond = info.time_codes_per_second
+    layer.startTimeCode = info.start_time_code
+    layer.endTimeCode = info.end_time_code
+    if default_prim:
+        layer.defaultPrim = default_prim
+    return layer
+
+
+def _relative(target: Path, start: Path) -> str:
+    rel = Path(os.path.relpath(target.resolve(), start.resolve())).as_posix()
+    return rel if rel.startswith("../") else f"./{rel}"
+
+
+@contextmanager
+def _atomic_folder(path: Path) -> Iterator[Path]:
+    """Like :func:`atomic_output` for a folder: a temporary folder renamed onto ``path``."""
+    if not path.parent.is_dir():
+        raise FileNotFoundError(f"{path.parent}: output folder does not exist")
+    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", dir=path.parent))
+    umask = os.umask(0)
+    os.umask(umask)
+    tmp.chmod(0o777 & ~umask)  # mkdtemp makes 0700
+    try:
+        yield tmp
+        old = None
+        if path.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{path.name}.old.", dir=path.parent))
+            os.replace(path, old / path.name)
+        os.replace(tmp, path)
+        if old is not None:
+            shutil.rmtree(old)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp)
+
+
+def check_outputs(input_path: Path, output: Path, root_layer: Path | None = None) -> None:
+    """Fail before any work on outputs that would overwrite the input, bad suffixes or missing
+    folders.
+
+    Raises:
+        ValueError: a suffix that is not a USD layer's, or an output that is the input.
+        FileNotFoundError: an output folder does not exist.
+    """
+    outputs = [output] + ([root_layer] if root_layer is not None else [])
+    for out in outputs:
+        if out.suffix.lower() not in LAYER_SUFFIXES:
+            names = ", ".join(LAYER_SUFFIXES)
+            raise ValueError(f"{out}: the output layer must end in one of {names}")
+        if not out.parent.is_dir():
+            raise FileNotFoundError(f"{out.parent}: output folder does not exist")
+        if out.resolve() == input_path.resolve():
+            raise ValueError(f"{out}: the output would overwrite the input")
+    if root_layer is not None and root_layer.resolve() == output.resolve():
+        raise ValueError(f"{root_layer}: the root layer and the garment layer are the same file")
+
+
+def write_garment_layer(
+    path: str | Path,
+    info: StageInfo,
+    garments: list[GarmentFrames],
+    time_codes: np.ndarray,
+    *,
+    clip_threshold: int = CLIP_THRESHOLD,
+    clip_frames: int = CLIP_FRAMES,
+    root_layer: str | Path | None = None,
+) -> list[Path]:
+    """Write ``garments`` as a new layer at ``path`` (format by suffix); never touches the input.
+
+    Args:
+        path: output layer (``.usdc``/``.usd`` binary, ``.usda`` text).
+        info: the input stage's description (units, axes, timing, SkelRoot, skeleton).
+        garments: the garments, points ``(T, N, 3)`` in the canonical frame.
+        time_codes: ``(T,)`` input time codes of the frames.
+        clip_threshold: frames × vertices (summed over garments) above which value clips are
+            written.
+        clip_frames: frames per clip file.
+        root_layer: also write this small layer that sublayers the garment layer and the input.
+
+    Returns:
+        The paths written: the layer, then the clip folder and the root layer if any.
+
+    Raises:
+        ValueError, FileNotFoundError: see :func:`check_outputs`.
+    """
+    path = Path(path)
+    root = Path(root_layer) if root_layer is not None else None
+    check_outputs(Path(info.path), path, root)
+    time_codes = np.asarray(time_codes, dtype=np.float64)
+    parent = garment_parent_path(info)
+    parent_to_world, existing = _parent_to_world(info, parent)
+    canonical_to_local = np.asarray(info.canonical_to_world) @ np.linalg.inv(parent_to_world)
+    mirrored = np.linalg.det(canonical_to_local[:3, :3]) < 0
+    default_prim = parent.GetPrefixes()[0].name
+    total = sum(g.points.shape[0] * g.points.shape[1] for g in garments)
+    use_clips = total > clip_threshold
+    clip_dir = path.with_name(f"{path.stem}.clips")
+    main = _new_layer(info, default_prim)
+    topology = _new_layer(info, default_prim) if use_clips else main
+    with Sdf.ChangeBlock():
+        for garment in garments:
+            faces = _oriented_faces(garment, mirrored)
+            mesh_path = parent.AppendChild(garment.name)
+            _author_static(topology, mesh_path, garment, faces, canonical_to_local, existing)
+    _apply_garment_api(topology, parent, garments, info)
+    layers: dict[str, Sdf.Layer] = {}
+    starts = list(range(0, len(time_codes), clip_frames)) if use_clips else [0]
+    clip_layers = [_new_layer(info, default_prim) for _ in starts] if use_clips else [main]
+    with Sdf.ChangeBlock():
+        for garment in garments:
+            faces = _oriented_faces(garment, mirrored)
+            mesh_path = parent.AppendChild(garment.name)
+            pts = np.asarray(garment.points, dtype=np.float64)
+            local = pts @ canonical_to_local[:3, :3] + canonical_to_local[3, :3]
+            for layer, s in zip(clip_layers, starts, strict=True):
+                e = min(s + clip_frames + 1, len(time_codes)) if use_clips else len(time_codes)
+                _author_samples(layer, mesh_path, local[s:e], faces, time_codes[s:e])
+        if use_clips:
+            _author_clips(main, parent, garments, existing, time_codes, starts, clip_dir.name)
+            layers[TOPOLOGY_NAME] = topology
+            layers[MANIFEST_NAME] = _manifest(info, default_prim, parent, garments)
+            layers.update({CLIP_NAME.format(k): layer for k, layer in enumerate(clip_layers)})
+    with ExitStack() as stack:
+        if root is not None:
+            tmp_root = stack.enter_context(atomic_output(root))
+            _export(_root_layer(info, default_prim, path, root), tmp_root)
+        tmp_main = stack.enter_context(atomic_output(path))
+        _export(main, tmp_main)
+        if use_clips:
+            tmp_clips = stack.enter_context(_atomic_folder(clip_dir))
+            for name, layer in layers.items():
+                _export(layer, tmp_clips / name)
+    return [path] + ([clip_dir] if use_clips else []) + ([root] if root is not None else [])
+
+
+def _author_clips(
+    main: Sdf.Layer,
+    parent: Sdf.Path,
+    garments: list[GarmentFrames],
+    existing: set[str],
+    time_codes: np.ndarray,
+    starts: list[int],
+    folder: str,
+) -> None:
+    """Sublayer the topology layer and author the value-clip metadata on every mesh of ``main``:
+    clip k is active from frame ``starts[k]``; stage and clip times are the same."""
+    main.subLayerPaths = [f"./{folder}/{TOPOLOGY_NAME}"]
+    clips = {
+        "assetPaths": Sdf.AssetPathArray(
+            [f"./{folder}/{CLIP_NAME.format(k)}" for k in range(len(starts))]
+        ),
+        "active": Vt.Vec2dArray([(float(time_codes[s]), float(k)) for k, s in enumerate(starts)]),
+        "times": Vt.Vec2dArray([(float(t), float(t)) for t in time_codes[[0, -1]]]),
+        "manifestAssetPath": Sdf.AssetPath(f"./{folder}/{MANIFEST_NAME}"),
+    }
+    for garment in garments:
+        mesh_path = parent.AppendChild(garment.name)
+        spec = _define_hierarchy(main, mesh_path, existing, define=True)
+        spec.SetInfo("clips", {"default": {**clips, "primPath": str(mesh_path)}})
+
+
+def _oriented_faces(garment: GarmentFrames, mirrored: bool) -> np.ndarray:
+    """``(F, 3)`` faces, winding reversed when the stage's frame is a mirror image."""
+    faces = np.asarray(garment.faces, dtype=np.int64)
+    return faces[:, ::-1] if mirrored else faces
+
+
+def _export(layer: Sdf.Layer, path: Path) -> None:
+    if not layer.Export(str(path)):
+        raise OSError(f"{path}: could not write the layer")
+
+
+def _manifest(
+    info: StageInfo, default_prim: str, parent: Sdf.Path, garments: list[GarmentFrames]
+) -> Sdf.Layer:
+    """The clip manifest: which attributes of which meshes the clips animate."""
+    layer = _new_layer(info, default_prim)
+    for garment in garments:
+        spec = _define_hierarchy(layer, parent.AppendChild(garment.name), set(), define=False)
+        Sdf.AttributeSpec(spec, "points", Sdf.ValueTypeNames.Point3fArray)
+        Sdf.AttributeSpec(spec, "normals", Sdf.ValueTypeNames.Normal3fArray)
+        Sdf.AttributeSpec(spec, "extent", Sdf.ValueTypeNames.Float3Array)
+    return layer
+
+
+def _root_layer(info: StageInfo, default_prim: str, garment_layer: Path, root: Path) -> Sdf.Layer:
+    """A layer that sublayers the garment layer (stronger) and the input."""
+    name = Sdf.Path(info.default_prim).name if info.default_prim else default_prim
+    layer = _new_layer(info, name)
+    layer.subLayerPaths = [
+        _relative(garment_layer, root.parent),
+        _relative(Path(info.path), root.parent),
+    ]
+    return layer
