@@ -10,6 +10,7 @@ from usd_garment.cli.body import body
 from usd_garment.cli.dress import dress
 from usd_garment.cli.evaluate import evaluate
 from usd_garment.cli.garment import garment
+from usd_garment.cli.motion import motion
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -24,3 +25,4 @@ main.add_command(import_amass)
 main.add_command(export_amass)
 main.add_command(dress)
 main.add_command(evaluate)
+main.add_command(motion)

@@ -1,0 +1,85 @@
+"""``usd-garment motion``: make procedural SMPL motions as playable USD body layers."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+import numpy as np
+
+from usd_garment.body import NUM_BETAS, load_body_model
+from usd_garment.cli.body import body_model_option
+from usd_garment.cli.errors import user_errors
+from usd_garment.motion.procedural import MOTION_KINDS, make_motion, random_betas
+from usd_garment.usd.body_layer import write_body_layer
+
+USD_SUFFIXES = (".usd", ".usda", ".usdc")
+
+
+@click.group()
+def motion() -> None:
+    """Procedural motions: list the kinds, make a USD body layer."""
+
+
+@motion.command("list")
+def list_kinds() -> None:
+    """The motion kinds and what each does."""
+    width = max(len(kind) for kind in MOTION_KINDS)
+    for kind, description in MOTION_KINDS.items():
+        click.echo(f"{kind:<{width}}  {description}")
+
+
+def _betas(text: str | None, seed: int) -> np.ndarray | None:
+    """``--betas``: up to 10 numbers (comma or space separated), ``random`` for a random shape
+    drawn with the motion's seed, or None for the mean shape."""
+    if text is None:
+        return None
+    if text.strip().lower() == "random":
+        return random_betas(np.random.default_rng(seed))
+    try:
+        values = [float(x) for x in text.replace(",", " ").split()]
+    except ValueError as exc:
+        raise click.BadParameter(f"not a list of numbers: {text!r}", param_hint="--betas") from exc
+    if len(values) > NUM_BETAS or not np.isfinite(values).all():
+        raise click.BadParameter(f"at most {NUM_BETAS} finite values", param_hint="--betas")
+    return np.asarray(values, dtype=np.float32)
+
+
+@motion.command("make")
+@click.argument("kind", type=click.Choice(list(MOTION_KINDS)), metavar="KIND")
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(dir_okay=False, path_type=Path),
+    required=True,
+    help="USD body layer to write (.usda, .usdc or .usd).",
+)
+@click.option("--frames", type=click.IntRange(min=1), default=120, show_default=True)
+@click.option("--fps", type=click.FloatRange(min=0, min_open=True), default=30.0, show_default=True)
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the motion.")
+@click.option(
+    "--betas",
+    default=None,
+    help="Body shape: up to 10 numbers ('0.5,-1'), or 'random' (clipped normal, seeded by "
+    "--seed). Default: the mean shape.",
+)
+@body_model_option
+def make(
+    kind: str,
+    output: Path,
+    frames: int,
+    fps: float,
+    seed: int,
+    betas: str | None,
+    body_model: Path | None,
+) -> None:
+    """Write a procedural motion of KIND as a playable USD body layer (skeleton, animation and
+    skinned mesh; Y-up, metres)."""
+    if output.suffix.lower() not in USD_SUFFIXES:
+        raise click.BadParameter("the output must end in .usda, .usdc or .usd", param_hint="-o")
+    shape = _betas(betas, seed)
+    with user_errors():
+        body = load_body_model(body_model)
+        result = make_motion(kind, frames, fps, seed=seed, betas=shape, body=body)
+        write_body_layer(output, result, body)
+    click.echo(f"wrote {output}: {kind}, {result.num_frames} frames at {result.fps:g} fps")
