@@ -13,34 +13,16 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
-import numpy as np
 import torch
-from matplotlib.collections import PolyCollection
 
 from usd_garment.body import load_body_model
+from usd_garment.eval.render import SKIN, draw_meshes
 from usd_garment.motion.procedural import MOTION_KINDS, make_motion
 
 FPS = 30.0
 FRAMES = 96
 SHOWN = (0, 15, 30, 45, 60, 75, 95)
 VIEW_DEG = 40.0  # view turned from the front towards the body's left
-LIGHT = np.array([0.3, 0.5, 0.8]) / np.linalg.norm([0.3, 0.5, 0.8])
-
-
-def draw_body(
-    ax: plt.Axes, vertices: np.ndarray, faces: np.ndarray, right: np.ndarray, towards: np.ndarray
-) -> None:
-    """Flat-shaded triangles of ``vertices`` ``(V, 3)`` projected on (``right``, up)."""
-    tri = vertices[faces]  # (F, 3, 3)
-    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    normal /= np.linalg.norm(normal, axis=1, keepdims=True) + 1e-12
-    front = normal @ towards > 0.0
-    tri, normal = tri[front], normal[front]
-    order = np.argsort(tri.mean(axis=1) @ towards)
-    shade = 0.25 + 0.75 * np.clip(normal[order] @ LIGHT, 0.0, 1.0)
-    xy = np.stack([tri[order] @ right, tri[order][..., 1]], axis=-1)
-    colour = shade[:, None] * np.array([0.85, 0.65, 0.5])
-    ax.add_collection(PolyCollection(xy, facecolors=colour, edgecolors=colour, linewidths=0.2))
 
 
 def main() -> None:
@@ -54,9 +36,6 @@ def main() -> None:
 
     body = load_body_model()
     faces = body.faces.numpy()
-    angle = np.radians(VIEW_DEG)
-    right = np.array([np.cos(angle), 0.0, -np.sin(angle)])  # screen x (the viewer's right)
-    towards = np.array([np.sin(angle), 0.0, np.cos(angle)])  # towards the viewer
     kinds = args.kinds
     fig, axes = plt.subplots(
         len(kinds), len(SHOWN), squeeze=False, figsize=(2.0 * len(SHOWN), 2.3 * len(kinds))
@@ -74,7 +53,7 @@ def main() -> None:
             ax = axes[row, col]
             v = out.vertices[col].double().numpy()
             v[:, [0, 2]] -= motion.trans[frame, [0, 2]]  # keep travelling bodies in frame
-            draw_body(ax, v, faces, right, towards)
+            draw_meshes(ax, [(v, faces, SKIN)], VIEW_DEG)
             ax.axhline(-1.133, color="0.6", lw=0.5)
             ax.set_xlim(-1.0, 1.0)
             ax.set_ylim(-1.2, 1.0)
