@@ -9,6 +9,7 @@ from usd_garment.cli.amass import export_amass, import_amass
 from usd_garment.cli.body import body
 from usd_garment.cli.dress import dress
 from usd_garment.cli.evaluate import evaluate
+from usd_garment.cli.fields import fields
 from usd_garment.cli.garment import garment
 from usd_garment.cli.motion import motion
 
@@ -26,3 +27,4 @@ main.add_command(export_amass)
 main.add_command(dress)
 main.add_command(evaluate)
 main.add_command(motion)
+main.add_command(fields)

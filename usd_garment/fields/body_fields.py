@@ -1,0 +1,291 @@
+"""The diffused body fields at run time: skinning weights W̃(p), shape blendshape matrices B̃s(p)
+and (when the body has them) pose blendshape matrices B̃p(p), plus the canonical body SDF, all
+baked into grids with differentiable trilinear interpolation; and their file format.
+
+Shapes: ``(..., N, 3)`` query points in the canonical space (β = 0, T-pose), metres; J = 24
+joints, K = 10 betas, P = 207 pose features. Blendshape fields are per-point matrices, linear in
+β (or in the pose features), so one evaluation serves every shape and frame.
+"""
+
+from __future__ import annotations
+
+import json
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from usd_garment.atomic import atomic_output
+from usd_garment.body.joints import NUM_BETAS, NUM_JOINTS
+from usd_garment.fields.grid import DenseGrid, SparseGrid
+
+#: Version of the fields file layout.
+FORMAT_VERSION = 1
+DEFAULT_FIELDS_FILE = "default_body_fields.npz"
+NUM_POSE_FEATURES = 9 * (NUM_JOINTS - 1)
+
+
+def default_fields_path() -> Path:
+    """Path of the fields fitted to the embedded default body."""
+    return Path(str(resources.files("usd_garment") / "data" / "fields" / DEFAULT_FIELDS_FILE))
+
+
+class BodyFields(torch.nn.Module):
+    """Diffused skinning fields of one body model in its canonical space (β = 0, T-pose).
+
+    Fields live in sparse grids over bands around the body (finer near it) and a coarse dense
+    grid over the whole box (used beyond the bands; clamped beyond the box). The SDF lives in a fine
+    sparse grid near the surface and a coarse dense grid; beyond the coarse box it returns the
+    box's boundary value plus the distance to the box (an upper bound, so conservative).
+
+    Args:
+        field_levels: sparse grids, finest first, each with groups ``weights`` (24),
+            ``shape_dirs`` (30) and optionally ``pose_dirs`` (621); a point reads the finest
+            level whose band holds its cell.
+        fields_coarse: dense grid with the same groups, for points outside every band.
+        sdf_fine: sparse grid with group ``sdf`` (1).
+        sdf_coarse: dense grid with group ``sdf`` (1).
+        body_name: name of the body model the fields were fitted to.
+        config: how the fields were made (JSON-serialisable).
+        mlp_state: optional state of the fitted MLPs (kept for reference evaluations).
+    """
+
+    def __init__(
+        self,
+        field_levels: list[SparseGrid],
+        fields_coarse: DenseGrid,
+        sdf_fine: SparseGrid,
+        sdf_coarse: DenseGrid,
+        body_name: str,
+        config: dict[str, Any] | None = None,
+        mlp_state: dict[str, np.ndarray] | None = None,
+    ) -> None:
+        super().__init__()
+        self.field_levels = torch.nn.ModuleList(field_levels)
+        self.fields_coarse = fields_coarse
+        self.sdf_fine = sdf_fine
+        self.sdf_coarse = sdf_coarse
+        self.body_name = body_name
+        self.config: dict[str, Any] = dict(config or {})
+        self.mlp_state = mlp_state
+
+    @property
+    def has_pose_dirs(self) -> bool:
+        return "pose_dirs" in self.fields_coarse.names
+
+    def _fields(self, points: torch.Tensor, names: tuple[str, ...]) -> list[torch.Tensor]:
+        """Values ``(..., N, C)`` of field groups at points ``(..., N, 3)``."""
+        lead = points.shape[:-1]
+        flat = points.reshape(-1, 3).to(self.fields_coarse.origin)
+        values: list[torch.Tensor] | None = None
+        todo = torch.arange(flat.shape[0], device=flat.device)
+        for level in self.field_levels:
+            level_values, valid = level(flat[todo], names)
+            if values is None:
+                values = level_values
+            else:
+                rows = todo[valid]
+                values = [
+                    v.index_put((rows,), lv[valid])
+                    for v, lv in zip(values, level_values, strict=True)
+                ]
+            todo = todo[~valid]
+            if not todo.numel():
+                break
+        if values is None or todo.numel():
+            coarse = self.fields_coarse(flat[todo], names)
+            values = (
+                coarse
+                if values is None
+                else [v.index_put((todo,), c) for v, c in zip(values, coarse, strict=True)]
+            )
+        return [v.reshape(*lead, v.shape[-1]) for v in values]
+
+    def weights(self, points: torch.Tensor) -> torch.Tensor:
+        """Diffused skinning weights ``(..., N, 24)`` at points ``(..., N, 3)``; rows are ≥ 0 and
+        sum to 1."""
+        (w,) = self._fields(points, ("weights",))
+        w = w.clamp_min(0.0)
+        return w / w.sum(-1, keepdim=True).clamp_min(1e-8)
+
+    def shape_dirs(self, points: torch.Tensor) -> torch.Tensor:
+        """Diffused shape blendshapes ``(..., N, 3, 10)`` (m per unit β) at points ``(..., N, 3)``;
+        the offset for betas β is ``einsum('...nck,k->...nc', shape_dirs, β)``."""
+        (s,) = self._fields(points, ("shape_dirs",))
+        return s.reshape(*s.shape[:-1], 3, NUM_BETAS)
+
+    def pose_dirs(self, points: torch.Tensor) -> torch.Tensor | None:
+        """Diffused pose blendshapes ``(..., N, 3, 207)`` at points ``(..., N, 3)``, or None when
+        the body has no pose blendshapes."""
+        if not self.has_pose_dirs:
+            return None
+        (p,) = self._fields(points, ("pose_dirs",))
+        return p.reshape(*p.shape[:-1], 3, NUM_POSE_FEATURES)
+
+    def all_fields(
+        self, points: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
+        """``weights``, ``shape_dirs`` and ``pose_dirs`` at once (one grid lookup)."""
+        names = (
+            ("weights", "shape_dirs", "pose_dirs")
+            if self.has_pose_dirs
+            else ("weights", "shape_dirs")
+        )
+        values = self._fields(points, names)
+        w = values[0].clamp_min(0.0)
+        w = w / w.sum(-1, keepdim=True).clamp_min(1e-8)
+        s = values[1].reshape(*values[1].shape[:-1], 3, NUM_BETAS)
+        p = None
+        if self.has_pose_dirs:
+            p = values[2].reshape(*values[2].shape[:-1], 3, NUM_POSE_FEATURES)
+        return w, s, p
+
+    def sdf(self, points: torch.Tensor) -> torch.Tensor:
+        """Signed distance ``(..., N)`` (m) of points ``(..., N, 3)`` to the canonical body,
+        negative inside."""
+        lead = points.shape[:-1]
+        flat = points.reshape(-1, 3).to(self.sdf_fine.origin)
+        (d,), valid = self.sdf_fine(flat, ("sdf",))
+        d = d[:, 0]
+        missing = (~valid).nonzero().squeeze(1)
+        if missing.numel():
+            p = flat[missing]
+            inside = p.clamp(self.sdf_coarse.origin, self.sdf_coarse.upper)
+            (coarse,) = self.sdf_coarse(inside, ("sdf",))
+            gap = (p - inside).square().sum(-1)
+            outside = gap > 0
+            gap = torch.where(outside, gap, torch.ones_like(gap)).sqrt() * outside
+            d = d.index_put((missing,), coarse[:, 0] + gap)
+        return d.reshape(lead)
+
+    def summary(self) -> dict[str, Any]:
+        """Sizes and settings, for ``usd-garment fields info``."""
+        return {
+            "body": self.body_name,
+            "pose_dirs": self.has_pose_dirs,
+            "field_levels": [
+                {
+                    "spacing_m": level.spacing,
+                    "lattice": list(level.shape),
+                    "band_nodes": int(level.mask.sum()),
+                }
+                for level in self.field_levels
+            ],
+            "fields_coarse": {
+                "spacing_m": self.fields_coarse.spacing,
+                "lattice": list(self.fields_coarse.shape),
+            },
+            "sdf_grid": {
+                "spacing_m": self.sdf_fine.spacing,
+                "lattice": list(self.sdf_fine.shape),
+                "band_nodes": int(self.sdf_fine.mask.sum()),
+                "coarse_spacing_m": self.sdf_coarse.spacing,
+                "coarse_lattice": list(self.sdf_coarse.shape),
+            },
+            "box_min_m": self.fields_coarse.origin.tolist(),
+            "box_max_m": self.fields_coarse.upper.tolist(),
+            "has_mlp": self.mlp_state is not None,
+            "config": self.config,
+        }
+
+
+def _pack_sparse(prefix: str, grid: SparseGrid, out: dict[str, np.ndarray]) -> None:
+    out[f"{prefix}/origin"] = grid.origin.cpu().numpy()
+    out[f"{prefix}/spacing"] = np.float32(grid.spacing)
+    out[f"{prefix}/shape"] = np.array(grid.shape, dtype=np.int64)
+    out[f"{prefix}/mask"] = np.packbits(grid.mask.cpu().numpy().reshape(-1))
+    for name in grid.names:
+        out[f"{prefix}/{name}"] = grid.channel(name).cpu().numpy().astype(np.float16)
+
+
+def _pack_dense(prefix: str, grid: DenseGrid, out: dict[str, np.ndarray]) -> None:
+    out[f"{prefix}/origin"] = grid.origin.cpu().numpy()
+    out[f"{prefix}/spacing"] = np.float32(grid.spacing)
+    out[f"{prefix}/shape"] = np.array(grid.shape, dtype=np.int64)
+    for name in grid.names:
+        out[f"{prefix}/{name}"] = grid.channel(name).cpu().numpy().astype(np.float16)
+
+
+def _group_names(data: dict[str, np.ndarray], prefix: str) -> list[str]:
+    skip = {"origin", "spacing", "shape", "mask"}
+    keys = [k.split("/", 1)[1] for k in data if k.startswith(prefix + "/")]
+    return [k for k in keys if k not in skip]
+
+
+def _unpack_sparse(prefix: str, data: dict[str, np.ndarray]) -> SparseGrid:
+    shape = tuple(int(s) for s in data[f"{prefix}/shape"])
+    count = int(np.prod(shape))
+    mask = np.unpackbits(data[f"{prefix}/mask"], count=count).astype(bool).reshape(shape)
+    channels = {
+        n: torch.from_numpy(data[f"{prefix}/{n}"].astype(np.float32))
+        for n in _group_names(data, prefix)
+    }
+    origin = torch.from_numpy(data[f"{prefix}/origin"])
+    return SparseGrid(origin, float(data[f"{prefix}/spacing"]), torch.from_numpy(mask), channels)
+
+
+def _unpack_dense(prefix: str, data: dict[str, np.ndarray]) -> DenseGrid:
+    shape = tuple(int(s) for s in data[f"{prefix}/shape"])
+    channels = {
+        n: torch.from_numpy(data[f"{prefix}/{n}"].astype(np.float32).reshape(*shape, -1))
+        for n in _group_names(data, prefix)
+    }
+    origin = torch.from_numpy(data[f"{prefix}/origin"])
+    return DenseGrid(origin, float(data[f"{prefix}/spacing"]), channels)
+
+
+def save_body_fields(path: str | Path, fields: BodyFields) -> None:
+    """Write ``fields`` as a compressed ``.npz`` (grid values and MLP state in float16),
+    atomically."""
+    out: dict[str, np.ndarray] = {
+        "version": np.array(FORMAT_VERSION),
+        "body_name": np.array(fields.body_name),
+        "config": np.array(json.dumps(fields.config)),
+    }
+    out["field_levels"] = np.array(len(fields.field_levels))
+    for i, level in enumerate(fields.field_levels):
+        _pack_sparse(f"fields_{i}", level, out)
+    _pack_dense("fields_coarse", fields.fields_coarse, out)
+    _pack_sparse("sdf_fine", fields.sdf_fine, out)
+    _pack_dense("sdf_coarse", fields.sdf_coarse, out)
+    for key, value in (fields.mlp_state or {}).items():
+        out[f"mlp/{key}"] = np.asarray(value, dtype=np.float16)
+    with atomic_output(Path(path)) as tmp, tmp.open("wb") as fh:
+        np.savez_compressed(fh, **out)
+
+
+def load_body_fields(path: str | Path | None = None) -> BodyFields:
+    """Load fields written by :func:`save_body_fields`; ``None`` loads the default body's.
+
+    Raises:
+        ValueError: the file is missing or is not a body fields file of this version.
+    """
+    path = default_fields_path() if path is None else Path(path)
+    if not path.is_file():
+        raise ValueError(f"{path}: no such body fields file")
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            data = {k: npz[k] for k in npz.files}
+    except (OSError, ValueError, EOFError) as exc:
+        raise ValueError(f"{path}: cannot read body fields ({exc})") from exc
+    if "version" not in data or "field_levels" not in data:
+        raise ValueError(f"{path}: not a body fields file")
+    if int(data["version"]) != FORMAT_VERSION:
+        raise ValueError(f"{path}: body fields version {int(data['version'])} is not supported")
+    mlp = {
+        k.split("/", 1)[1]: v.astype(np.float32) for k, v in data.items() if k.startswith("mlp/")
+    }
+    fields = BodyFields(
+        [_unpack_sparse(f"fields_{i}", data) for i in range(int(data["field_levels"]))],
+        _unpack_dense("fields_coarse", data),
+        _unpack_sparse("sdf_fine", data),
+        _unpack_dense("sdf_coarse", data),
+        body_name=str(data["body_name"]),
+        config=json.loads(str(data["config"])),
+        mlp_state=mlp or None,
+    )
+    if fields.fields_coarse.channel("weights").shape[1] != NUM_JOINTS:
+        raise ValueError(f"{path}: the weights field does not have 24 joints")
+    return fields

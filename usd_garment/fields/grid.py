@@ -1,0 +1,140 @@
+"""Baked 3D grids with differentiable trilinear interpolation: the fast evaluator of the diffused
+body fields and of the canonical body SDF.
+
+A :class:`SparseGrid` stores values only at the lattice nodes of a band (a boolean mask over a
+regular lattice); a :class:`DenseGrid` stores every node of a box. Both interpolate with a gather
+of the 8 cell corners, so gradients flow to the query points through the trilinear weights.
+Shapes: M query points, C channels; positions in metres.
+"""
+
+from __future__ import annotations
+
+import torch
+
+
+def _cell_and_weights(
+    points: torch.Tensor, origin: torch.Tensor, spacing: float, shape: tuple[int, int, int]
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Flat lattice indices ``(M, 8)`` of the corners of each point's cell and the matching
+    trilinear weights ``(M, 8)``, for points ``(M, 3)``. Points are clamped to the lattice box
+    (so the weights' gradient is zero outside it). Corner c = 4·dx + 2·dy + dz."""
+    upper = torch.tensor(shape, dtype=points.dtype, device=points.device) - 1
+    g = torch.maximum(torch.minimum((points - origin) / spacing, upper), torch.zeros_like(upper))
+    cell = torch.minimum(g.detach().floor(), upper - 1)
+    t = g - cell  # (M, 3) in [0, 1]
+    pair = torch.stack([1 - t, t], dim=-1)  # (M, 3, 2)
+    w = pair[:, 0, :, None, None] * pair[:, 1, None, :, None] * pair[:, 2, None, None, :]
+    cell = cell.long()
+    base = (cell[:, 0] * shape[1] + cell[:, 1]) * shape[2] + cell[:, 2]
+    d = torch.arange(2, device=points.device)
+    offsets = (d[:, None, None] * shape[1] + d[None, :, None]) * shape[2] + d[None, None, :]
+    return base[:, None] + offsets.reshape(1, 8), w.reshape(-1, 8)
+
+
+def _interpolate(w: torch.Tensor, table: torch.Tensor, rows: torch.Tensor) -> torch.Tensor:
+    """``(M, C)``: the rows ``(M, 8)`` of ``table`` ``(R, C)`` weighted by ``w`` ``(M, 8)``."""
+    corner_values = table.index_select(0, rows.reshape(-1)).reshape(*rows.shape, -1)
+    return torch.bmm(w[:, None, :], corner_values)[:, 0]
+
+
+def _register_channels(module: torch.nn.Module, channels: dict[str, torch.Tensor]) -> None:
+    for name, values in channels.items():
+        module.register_buffer(f"values_{name}", values.float().reshape(-1, values.shape[-1]))
+
+
+class DenseGrid(torch.nn.Module):
+    """Named channel groups at the nodes ``origin + spacing · (i, j, k)`` of a box.
+
+    Args:
+        origin: ``(3,)`` position of node (0, 0, 0) (m).
+        spacing: node spacing (m).
+        channels: name → ``(nx, ny, nz, C)`` node values.
+
+    Points outside the box read the value at their clamped position (border extension).
+    """
+
+    origin: torch.Tensor
+
+    def __init__(
+        self, origin: torch.Tensor, spacing: float, channels: dict[str, torch.Tensor]
+    ) -> None:
+        super().__init__()
+        first = next(iter(channels.values()))
+        self.spacing = float(spacing)
+        self.shape: tuple[int, int, int] = tuple(int(s) for s in first.shape[:3])  # type: ignore[assignment]
+        self.names = tuple(channels)
+        self.register_buffer("origin", torch.as_tensor(origin, dtype=torch.float32))
+        _register_channels(self, channels)
+
+    def channel(self, name: str) -> torch.Tensor:
+        """``(nx·ny·nz, C)`` node values of one channel group."""
+        return getattr(self, f"values_{name}")
+
+    @property
+    def upper(self) -> torch.Tensor:
+        """``(3,)`` upper corner of the box (m); ``origin`` is the lower one."""
+        n = torch.tensor(self.shape, dtype=self.origin.dtype, device=self.origin.device)
+        return self.origin + self.spacing * (n - 1)
+
+    def forward(self, points: torch.Tensor, names: tuple[str, ...]) -> list[torch.Tensor]:
+        """Interpolated values ``(M, C)`` of each named group at points ``(M, 3)``."""
+        flat, w = _cell_and_weights(points, self.origin, self.spacing, self.shape)
+        return [_interpolate(w, self.channel(n), flat) for n in names]
+
+
+class SparseGrid(torch.nn.Module):
+    """Named channel groups at the masked nodes of a lattice ``origin + spacing · (i, j, k)``.
+
+    Args:
+        origin: ``(3,)`` position of node (0, 0, 0) (m).
+        spacing: node spacing (m).
+        mask: ``(nx, ny, nz)`` bool, the nodes that hold values.
+        channels: name → ``(mask.sum(), C)`` values of the masked nodes in C-order.
+    """
+
+    origin: torch.Tensor
+    index: torch.Tensor
+
+    def __init__(
+        self,
+        origin: torch.Tensor,
+        spacing: float,
+        mask: torch.Tensor,
+        channels: dict[str, torch.Tensor],
+    ) -> None:
+        super().__init__()
+        count = int(mask.sum())
+        if any(v.shape[0] != count for v in channels.values()):
+            raise ValueError("a sparse grid needs one value row per masked node")
+        self.spacing = float(spacing)
+        self.shape: tuple[int, int, int] = tuple(int(s) for s in mask.shape)  # type: ignore[assignment]
+        self.names = tuple(channels)
+        flat = mask.reshape(-1).bool()
+        index = torch.full((flat.numel(),), -1, dtype=torch.int64)
+        index[flat] = torch.arange(count)
+        self.register_buffer("origin", torch.as_tensor(origin, dtype=torch.float32))
+        self.register_buffer("index", index)
+        _register_channels(self, channels)
+
+    def channel(self, name: str) -> torch.Tensor:
+        """``(mask.sum(), C)`` node values of one channel group."""
+        return getattr(self, f"values_{name}")
+
+    @property
+    def mask(self) -> torch.Tensor:
+        """``(nx, ny, nz)`` bool mask of the nodes that hold values."""
+        return (self.index >= 0).reshape(self.shape)
+
+    def forward(
+        self, points: torch.Tensor, names: tuple[str, ...]
+    ) -> tuple[list[torch.Tensor], torch.Tensor]:
+        """Interpolated values ``(M, C)`` of each named group at points ``(M, 3)``, and ``(M,)``
+        bool: whether the point lies in the lattice and all 8 corners of its cell hold values
+        (rows where it is False are meaningless)."""
+        flat, w = _cell_and_weights(points, self.origin, self.spacing, self.shape)
+        rows = self.index[flat]  # (M, 8)
+        upper = torch.tensor(self.shape, dtype=points.dtype, device=points.device) - 1
+        g = (points.detach() - self.origin) / self.spacing
+        valid = (rows >= 0).all(-1) & ((g >= 0) & (g <= upper)).all(-1)
+        rows = rows.clamp_min(0)
+        return [_interpolate(w, self.channel(n), rows) for n in names], valid
