@@ -12,6 +12,7 @@ from usd_garment.cli.evaluate import evaluate
 from usd_garment.cli.fields import fields
 from usd_garment.cli.garment import garment
 from usd_garment.cli.motion import motion
+from usd_garment.cli.project import project
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -28,3 +29,4 @@ main.add_command(dress)
 main.add_command(evaluate)
 main.add_command(motion)
 main.add_command(fields)
+main.add_command(project)

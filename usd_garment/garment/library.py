@@ -3,6 +3,11 @@
 
 A template file is an ``.npz`` with vertices ``(N, 3)`` float32, faces ``(F, 3)`` int32, uvs
 ``(N, 2)`` float32 and string/int metadata: name, lod, body, body_fingerprint, recipe_version.
+
+Each template also has a *draped* version in the same format (``tshirt_high_draped.npz``): the
+template settled under gravity on the rest body by the cloth simulator (``usd-garment garment
+drape``), the shape the physics and everything downstream of it start from. The geometric
+template keeps the garment's rest lengths.
 """
 
 from __future__ import annotations
@@ -53,9 +58,9 @@ def cache_dir() -> Path:
     return Path(root) / "usd-garment" / "garments"
 
 
-def template_filename(name: str, lod: str) -> str:
-    """File name of a template, e.g. ``tshirt_high.npz``."""
-    return f"{name}_{lod}.npz"
+def template_filename(name: str, lod: str, draped: bool = False) -> str:
+    """File name of a template, e.g. ``tshirt_high.npz`` (``tshirt_high_draped.npz`` draped)."""
+    return f"{name}_{lod}_draped.npz" if draped else f"{name}_{lod}.npz"
 
 
 def save_template(path: str | Path, template: GarmentTemplate, provenance: Provenance) -> None:
@@ -107,29 +112,60 @@ def _check(name: str, lod: str) -> None:
         raise ValueError(f"unknown level of detail '{lod}' (known: {', '.join(LODS)})")
 
 
+def body_cache_dir(body: BodyModel) -> Path:
+    """Cache folder of the templates of ``body``: keyed by its fingerprint and the recipe."""
+    return cache_dir() / f"{body_fingerprint(body)}-v{RECIPE_VERSION}"
+
+
 def load_template(
-    name: str, lod: str = "high", body_model_path: str | Path | None = None
+    name: str,
+    lod: str = "high",
+    body_model_path: str | Path | None = None,
+    draped: bool = False,
 ) -> GarmentTemplate:
     """The template of garment ``name`` at level of detail ``lod``.
 
     Without ``body_model_path`` it is the committed template of the default body; with one, it
     is computed for that body's rest shape on first use and cached under ``cache_dir()``, keyed by
-    the body's fingerprint and the recipe version.
+    the body's fingerprint and the recipe version. ``draped`` gives the draped version, which
+    ``usd-garment garment drape`` makes (committed for the default body, cached for others).
 
     Raises:
         ValueError: unknown name or level of detail, or an unreadable template file.
+        FileNotFoundError: a draped template of a user's body that was not made yet.
         BodyModelError: the body model file cannot be loaded.
     """
     _check(name, lod)
     if body_model_path is None:
-        return read_template(template_dir() / template_filename(name, lod))[0]
+        return read_template(template_dir() / template_filename(name, lod, draped))[0]
     body = load_body_model(body_model_path)
     provenance = Provenance(body_fingerprint(body), RECIPE_VERSION)
-    folder = cache_dir() / f"{provenance.body_fingerprint}-v{RECIPE_VERSION}"
-    path = folder / template_filename(name, lod)
+    folder = body_cache_dir(body)
+    path = folder / template_filename(name, lod, draped)
     if path.is_file():
         return read_template(path)[0]
+    if draped:
+        raise FileNotFoundError(
+            f"no draped {name} ({lod}) for this body yet: run 'usd-garment garment drape {name} "
+            f"--lod {lod} --body-model {body_model_path}'"
+        )
     template = make_template(body, name, lod)
     folder.mkdir(parents=True, exist_ok=True)
     save_template(path, template, provenance)
     return template
+
+
+def find_draped(template: GarmentTemplate, body: BodyModel) -> GarmentTemplate | None:
+    """The draped version of ``template`` made on ``body`` (committed or cached), or None when
+    there is none with the same triangles fitted to the same rest body."""
+    fingerprint = body_fingerprint(body)
+    name = template_filename(template.name, template.lod, draped=True)
+    for path in (template_dir() / name, body_cache_dir(body) / name):
+        if not path.is_file():
+            continue
+        draped, provenance = read_template(path)
+        if provenance.body_fingerprint == fingerprint and np.array_equal(
+            draped.faces, template.faces
+        ):
+            return draped
+    return None

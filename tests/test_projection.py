@@ -1,0 +1,168 @@
+"""Projection to canonical space: recovers a garment posed by M_G itself, keeps it out of the
+canonical body, and the unposing baselines invert their own skinning."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from click.testing import CliRunner
+
+from usd_garment.body.io import load_body_model
+from usd_garment.canonical.dataset import load_canonical_set
+from usd_garment.canonical.projection import ProjectionSettings, project_sequence
+from usd_garment.canonical.strain import TriangleStrain
+from usd_garment.canonical.unpose import (
+    skin_body_vertices,
+    unpose_constant_weights,
+    unpose_nearest_vertex,
+)
+from usd_garment.cli.main import main
+from usd_garment.eval.body_distance import BodySurface, signed_distance
+from usd_garment.fields.body_fields import load_body_fields
+from usd_garment.garment.library import load_template
+from usd_garment.garment.model import GarmentModel
+from usd_garment.motion.sequence import SmplMotion
+from usd_garment.usd.body_layer import write_body_layer
+from usd_garment.usd.garment_layer import GarmentFrames, write_garment_layer
+from usd_garment.usd.read import read_smpl_motion
+
+FRAMES = 3
+
+
+@pytest.fixture(scope="module")
+def body():
+    return load_body_model()
+
+
+@pytest.fixture(scope="module")
+def template():
+    return load_template("tshirt", "low")
+
+
+@pytest.fixture(scope="module")
+def motion():
+    """Betas ``(10,)``, pose ``(T, 24, 3)`` and trans ``(T, 3)``: arms lowering, a twist."""
+    pose = np.zeros((FRAMES, 24, 3), dtype=np.float32)
+    pose[:, 16, 2] = -np.linspace(0.0, 0.8, FRAMES)  # left shoulder down
+    pose[:, 17, 2] = np.linspace(0.0, 0.8, FRAMES)
+    pose[:, 3, 1] = np.linspace(0.0, 0.3, FRAMES)
+    trans = np.linspace([0.0, 0.0, 0.0], [0.05, 0.01, 0.1], FRAMES).astype(np.float32)
+    betas = np.array([1.0, -0.5, 0.3, 0, 0, 0, 0, 0, 0, 0], dtype=np.float32)
+    return betas, pose, trans
+
+
+def test_strain_is_zero_at_rest_and_rotation_invariant(template):
+    strain = TriangleStrain(torch.as_tensor(template.vertices), torch.as_tensor(template.faces))
+    rest = torch.as_tensor(template.vertices)[None]
+    assert strain.energy(rest).item() < 1e-8
+    angle = torch.tensor(0.7)
+    c, s = torch.cos(angle), torch.sin(angle)
+    rot = torch.tensor([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+    assert strain.energy(rest @ rot.T + 1.0).item() < 1e-6
+    stretched = rest * torch.tensor([1.1, 1.0, 1.0])
+    assert strain.energy(stretched).item() > 1e-2
+
+
+def test_projection_recovers_a_garment_posed_by_the_model(body, template, motion):
+    betas, pose, trans = motion
+    model = GarmentModel(body, load_body_fields())
+    # A known canonical garment: the template with a smooth bulge, outside the body.
+    x_true = template.vertices + np.array([0.0, 0.0, 0.01]) * np.sin(
+        8.0 * template.vertices[:, 1:2]
+    ).clip(min=0)
+    x_true = np.repeat(x_true[None], FRAMES, axis=0).astype(np.float32)
+    with torch.no_grad():
+        posed = model(
+            torch.as_tensor(x_true), torch.as_tensor(betas), torch.as_tensor(pose),
+            torch.as_tensor(trans),
+        ).vertices.numpy()  # fmt: skip
+    done: list[int] = []
+    result = project_sequence(
+        model, template.vertices, template.faces, posed, betas, pose, trans,
+        ProjectionSettings(iterations=20, chunk=2), progress=done.append,
+    )  # fmt: skip
+    assert done == [2, 3]
+    assert result.canonical.shape == x_true.shape
+    assert result.error.max() < 2e-4  # m: well under a millimetre
+    assert np.abs(result.canonical - x_true).max() < 5e-3
+    assert np.linalg.norm(result.canonical - x_true, axis=-1).mean() < 5e-4
+    surface = BodySurface(body.faces.numpy(), body.num_vertices)
+    rest_body = np.repeat(body.v_template.numpy()[None], FRAMES, axis=0)
+    inside = signed_distance(result.canonical, rest_body, surface).distance < 0
+    assert inside.mean() == 0.0
+
+
+def test_projection_rejects_mismatched_input(body, template, motion):
+    betas, pose, trans = motion
+    model = GarmentModel(body, load_body_fields())
+    with pytest.raises(ValueError, match="points must be"):
+        project_sequence(model, template.vertices, template.faces, np.zeros((FRAMES, 5, 3)),
+                         betas, pose, trans)  # fmt: skip
+    nan = np.full((FRAMES, len(template.vertices), 3), np.nan)
+    with pytest.raises(ValueError, match="NaN"):
+        project_sequence(model, template.vertices, template.faces, nan, betas, pose, trans)
+
+
+@pytest.mark.parametrize("baseline", ["constant", "nearest"])
+def test_baselines_invert_their_own_skinning(body, template, motion, baseline):
+    betas, pose, trans = motion
+    # Posed input: the template skinned with constant nearest-vertex weights.
+    index = np.broadcast_to(
+        unpose_constant_weights(body, template, template.vertices[None], betas, pose[:1],
+                                trans[:1]).body_vertex[0], (FRAMES, len(template.vertices)),
+    )  # fmt: skip
+    canonical = np.repeat(template.vertices[None], FRAMES, axis=0)
+    posed = skin_body_vertices(body, canonical, index, betas, pose, trans)
+    if baseline == "constant":
+        result = unpose_constant_weights(body, template, posed, betas, pose, trans)
+        np.testing.assert_allclose(result.canonical, canonical, atol=1e-5)
+    else:
+        result = unpose_nearest_vertex(body, posed, betas, pose, trans)
+    assert result.canonical.shape == posed.shape and np.isfinite(result.canonical).all()
+    again = skin_body_vertices(body, result.canonical, result.body_vertex, betas, pose, trans)
+    np.testing.assert_allclose(again, posed, atol=1e-5)
+
+
+def _write_inputs(tmp_path, body, template, motion, points):
+    """A body layer and a garment layer holding ``points`` ``(T, N, 3)``."""
+    betas, pose, trans = motion
+    body_path, sim_path = tmp_path / "body.usda", tmp_path / "sim.usdc"
+    write_body_layer(body_path, SmplMotion(betas, pose, trans, fps=30.0), body, with_mesh=False)
+    read_motion, info = read_smpl_motion(body_path, body)
+    garment = GarmentFrames("tshirt", "tshirt", template.faces, template.uvs, points, "sim",
+                            "tshirt", "1", body.name)  # fmt: skip
+    write_garment_layer(sim_path, info, [garment], read_motion.time_codes)
+    return body_path, sim_path
+
+
+def test_project_command_writes_the_canonical_set(tmp_path, body, template, motion):
+    betas, pose, _ = motion
+    model = GarmentModel(body, load_body_fields())
+    x = np.repeat(template.vertices[None], FRAMES, axis=0)
+    with torch.no_grad():
+        posed = model(torch.as_tensor(x), *(torch.as_tensor(a) for a in motion)).vertices.numpy()
+    body_path, sim_path = _write_inputs(tmp_path, body, template, motion, posed)
+    out = tmp_path / "canonical.npz"
+    args = ["project", str(sim_path), str(sim_path), "--body", str(body_path), "-o", str(out),
+            "--lod", "low", "--iterations", "5"]  # fmt: skip
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 0, result.output
+    data = load_canonical_set(out)
+    assert data.canonical.shape == (2 * FRAMES, len(template.vertices), 3)
+    assert data.num_sequences == 2 and data.sources == [str(sim_path)] * 2
+    np.testing.assert_allclose(data.pose[data.sequence(1)], pose, atol=1e-5)
+    np.testing.assert_allclose(data.betas[0], betas, atol=1e-6)
+    assert data.error.max() < 2e-4
+    assert data.metadata["garment"] == "tshirt" and data.metadata["lod"] == "low"
+
+
+def test_project_command_rejects_another_garment_mesh(tmp_path, body, template, motion):
+    rest = np.repeat(template.vertices[None], FRAMES, axis=0)
+    body_path, sim_path = _write_inputs(tmp_path, body, template, motion, rest)
+    out = tmp_path / "canonical.npz"
+    args = ["project", str(sim_path), "--body", str(body_path), "-o", str(out), "--lod", "high"]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 1
+    assert "is not the tshirt 'high' template" in result.output
+    assert "Traceback" not in result.output and not out.exists()

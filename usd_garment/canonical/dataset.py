@@ -1,0 +1,86 @@
+"""The canonical training set file: projected garment sequences, one ``.npz``.
+
+Arrays (S sequences, T = ΣT_s frames in all, N garment vertices, F triangles):
+    canonical ``(T, N, 3)`` float32: canonical garment X per frame (m), sequences one after
+        another; sequence s is frames ``frame_offsets[s] .. frame_offsets[s+1]−1``.
+    frame_offsets ``(S + 1,)`` int64.
+    betas ``(S, 10)``, pose ``(T, 24, 3)`` (rad), trans ``(T, 3)`` (m), fps ``(S,)``: float32.
+    error ``(T,)``, max_error ``(T,)`` float32: mean and largest reprojection distance (m).
+    template ``(N, 3)`` float32 and faces ``(F, 3)`` int32: the garment template.
+    sources ``(S,)`` str: the simulated layer each sequence came from.
+    metadata: a JSON string (garment, lod, body model, projection settings, package version).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from usd_garment.atomic import atomic_output
+
+_ARRAYS = ("canonical", "frame_offsets", "betas", "pose", "trans", "fps", "error", "max_error")
+
+
+@dataclass
+class CanonicalSet:
+    """The content of a canonical training set file (see the module docstring for shapes)."""
+
+    canonical: np.ndarray
+    frame_offsets: np.ndarray
+    betas: np.ndarray
+    pose: np.ndarray
+    trans: np.ndarray
+    fps: np.ndarray
+    error: np.ndarray
+    max_error: np.ndarray
+    template: np.ndarray
+    faces: np.ndarray
+    sources: list[str] = field(default_factory=list)
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def num_sequences(self) -> int:
+        return len(self.frame_offsets) - 1
+
+    def sequence(self, s: int) -> slice:
+        """Frames of sequence ``s`` as a slice into the per-frame arrays."""
+        return slice(int(self.frame_offsets[s]), int(self.frame_offsets[s + 1]))
+
+
+def save_canonical_set(path: str | Path, data: CanonicalSet) -> None:
+    """Write ``data`` to ``path`` atomically (``.npz``)."""
+    arrays = {name: getattr(data, name) for name in _ARRAYS}
+    with atomic_output(path) as tmp, open(tmp, "wb") as handle:
+        np.savez_compressed(
+            handle,
+            **{k: np.asarray(v, dtype=np.int64 if k == "frame_offsets" else np.float32)
+               for k, v in arrays.items()},
+            template=np.asarray(data.template, dtype=np.float32),
+            faces=np.asarray(data.faces, dtype=np.int32),
+            sources=np.array(data.sources, dtype=str),
+            metadata=np.array(json.dumps(data.metadata)),
+        )  # fmt: skip
+
+
+def load_canonical_set(path: str | Path) -> CanonicalSet:
+    """Read a canonical training set file.
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: not a canonical training set file.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such file")
+    try:
+        with np.load(path) as npz:
+            values = {name: npz[name] for name in (*_ARRAYS, "template", "faces")}
+            sources = [str(s) for s in npz["sources"]]
+            metadata = json.loads(str(npz["metadata"]))
+    except (OSError, KeyError, ValueError) as exc:
+        raise ValueError(f"{path}: not a canonical training set file ({exc})") from exc
+    return CanonicalSet(**values, sources=sources, metadata=metadata)

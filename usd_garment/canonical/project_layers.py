@@ -1,0 +1,164 @@
+"""Project simulated garment layers (USD) to canonical space and write the training set file:
+the library side of ``usd-garment project``."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from usd_garment import __version__
+from usd_garment.body.io import load_body_model
+from usd_garment.canonical.dataset import CanonicalSet, save_canonical_set
+from usd_garment.canonical.projection import ProjectionSettings, project_sequence
+from usd_garment.fields.body_fields import load_body_fields
+from usd_garment.garment.library import load_template
+from usd_garment.garment.model import GarmentModel
+from usd_garment.motion.sequence import SmplMotion
+from usd_garment.usd.garment_read import read_garment_layer
+from usd_garment.usd.read import read_smpl_motion
+
+
+@dataclass
+class SequenceInput:
+    """One simulated sequence, read and matched to its body motion.
+
+    Attributes:
+        source: the simulated garment layer.
+        points: ``(T, N, 3)`` simulated garment (canonical frame, m).
+        motion: the body motion at the same time codes.
+    """
+
+    source: Path
+    points: np.ndarray
+    motion: SmplMotion
+
+
+def match_frames(points: np.ndarray, garment_times: np.ndarray, motion: SmplMotion) -> SmplMotion:
+    """The frames of ``motion`` at the garment layer's time codes ``(T,)``.
+
+    Raises:
+        ValueError: a garment time code has no body frame.
+    """
+    lookup = {float(t): i for i, t in enumerate(motion.time_codes)}
+    missing = [float(t) for t in garment_times if float(t) not in lookup]
+    if missing:
+        raise ValueError(
+            f"the body has no frame at time code {missing[0]:g} of the garment layer "
+            f"({len(missing)} of {len(garment_times)} frames missing)"
+        )
+    index = np.array([lookup[float(t)] for t in garment_times])
+    return SmplMotion(
+        betas=motion.betas,
+        pose=motion.pose[index],
+        trans=motion.trans[index],
+        fps=motion.fps,
+        time_codes=motion.time_codes[index],
+        gender=motion.gender,
+        model=motion.model,
+    )
+
+
+def project_layers(
+    sim_layers: Sequence[str | Path],
+    body_layers: Sequence[str | Path],
+    output: str | Path,
+    *,
+    garment: str = "tshirt",
+    lod: str = "high",
+    body_model: str | Path | None = None,
+    fields: str | Path | None = None,
+    settings: ProjectionSettings | None = None,
+    on_read: Callable[[int], None] | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> CanonicalSet:
+    """Project every simulated layer with the body motion of its body layer; write ``output``.
+
+    Args:
+        sim_layers: garment layers (time-sampled points), one per sequence.
+        body_layers: the animated SMPL body of each sequence (same count), or one for all.
+        output: the canonical training set file (``.npz``), written atomically at the end.
+        garment, lod: the garment template the simulations were made from.
+        body_model: SMPL-layout body file; the embedded default body by default.
+        fields: the body's diffused fields file; the default body's by default.
+        settings: projection parameters.
+        on_read: called once with the total number of frames after all inputs are read.
+        progress: called with the number of frames projected so far.
+
+    Raises:
+        ValueError, FileNotFoundError, UsdInputError, BodyModelError: bad input.
+    """
+    settings = settings or ProjectionSettings()
+    output = Path(output)
+    if output.suffix != ".npz":
+        raise ValueError(f"{output}: the output must be an .npz file")
+    if not output.parent.is_dir():
+        raise FileNotFoundError(f"{output.parent}: output folder does not exist")
+    if len(body_layers) not in (1, len(sim_layers)):
+        raise ValueError(
+            f"give one body layer per simulated layer, or one for all "
+            f"({len(sim_layers)} simulated, {len(body_layers)} body layers)"
+        )
+    body = load_body_model(body_model)
+    body_fields = load_body_fields(fields)
+    if body_fields.body_name != body.name:
+        raise ValueError(
+            f"the fields were fitted to body '{body_fields.body_name}', not '{body.name}'"
+        )
+    template = load_template(garment, lod, body_model)
+    try:
+        start = load_template(garment, lod, body_model, draped=True).vertices
+    except FileNotFoundError:  # no draped template for this body yet: start from the template
+        start = template.vertices
+    inputs = []
+    for k, sim in enumerate(sim_layers):
+        points, faces, info = read_garment_layer(sim)
+        if points.shape[1] != len(template.vertices) or not np.array_equal(faces, template.faces):
+            raise ValueError(
+                f"{sim}: the garment mesh ({points.shape[1]} vertices) is not the {garment} "
+                f"'{lod}' template ({len(template.vertices)} vertices)"
+            )
+        motion, _ = read_smpl_motion(body_layers[k % len(body_layers)], body)
+        inputs.append(
+            SequenceInput(Path(sim), points, match_frames(points, info.time_codes, motion))
+        )
+    total = sum(len(i.points) for i in inputs)
+    if on_read is not None:
+        on_read(total)
+    model = GarmentModel(body, body_fields)
+    results = []
+    done = 0
+    for item in inputs:
+        m = item.motion
+        result = project_sequence(
+            model, template.vertices, template.faces, item.points, m.betas, m.pose, m.trans,
+            settings, None if progress is None else (lambda n, d=done: progress(d + n)), start,
+        )  # fmt: skip
+        results.append(result)
+        done += len(item.points)
+    data = CanonicalSet(
+        canonical=np.concatenate([r.canonical for r in results]),
+        frame_offsets=np.cumsum([0] + [len(i.points) for i in inputs]),
+        betas=np.stack([i.motion.betas for i in inputs]),
+        pose=np.concatenate([i.motion.pose for i in inputs]),
+        trans=np.concatenate([i.motion.trans for i in inputs]),
+        fps=np.array([i.motion.fps for i in inputs]),
+        error=np.concatenate([r.error for r in results]),
+        max_error=np.concatenate([r.max_error for r in results]),
+        template=template.vertices,
+        faces=template.faces,
+        sources=[str(i.source) for i in inputs],
+        metadata={
+            "garment": garment,
+            "lod": lod,
+            "body_model": body.name,
+            "fields_body": body_fields.body_name,
+            "projection": settings.to_json(),
+            "seconds": sum(r.seconds for r in results),
+            "usd_garment_version": __version__,
+        },
+    )
+    save_canonical_set(output, data)
+    return data
