@@ -1,8 +1,10 @@
-"""Benchmark and acceptance figures of the diffused body fields: baked grid vs fitted MLP (speed
-at 4,400 points × 30 frames and error), surface skinning-weight error, smoothness across medial
-axes, and the SDF grid's error against the exact signed distance.
+"""Benchmark and acceptance figures of the diffused body fields: grid speed at 4,400 points × 30
+frames, surface skinning-weight error, smoothness across medial axes, the grid against the
+diffusion computed directly at random points, and the SDF grid's error against the exact signed
+distance. With ``--mlp FILE`` (fields made with ``fields fit --method mlp``), the same figures of
+that file's grid and of its MLPs are printed beside them.
 
-Run: ``python benchmarks/bench_fields.py [FIELDS.npz] [--body-model PATH] [--json]``
+Run: ``python benchmarks/bench_fields.py [FIELDS.npz] [--mlp FILE] [--body-model PATH] [--json]``
 """
 
 from __future__ import annotations
@@ -16,7 +18,12 @@ import torch
 
 from usd_garment.body import BodyModel, load_body_model
 from usd_garment.fields import BodyFields, load_body_fields
-from usd_garment.fields.evaluate import evaluate_fields, near_surface_points
+from usd_garment.fields.evaluate import (
+    evaluate_fields,
+    medial_axis_smoothness,
+    near_surface_points,
+    surface_weight_error,
+)
 from usd_garment.fields.fit import mlps_from_state
 
 GARMENT_VERTICES = 4_400
@@ -56,12 +63,24 @@ def speed(fields: BodyFields, body: BodyModel) -> dict[str, float]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("fields", nargs="?", default=None, help="fields file (default: shipped)")
+    parser.add_argument("--mlp", default=None, help="fields file with MLPs to compare against")
     parser.add_argument("--body-model", default=None, help="body the fields were fitted to")
     parser.add_argument("--json", action="store_true", help="print JSON only")
     args = parser.parse_args()
     fields = load_body_fields(args.fields)
     body = load_body_model(args.body_model)
     result = {"speed": speed(fields, body), **evaluate_fields(fields, body)}
+    if args.mlp is not None:
+        other = load_body_fields(args.mlp)
+        if other.mlp_state is None:
+            parser.error(f"{args.mlp}: holds no MLPs")
+        result["mlp_file"] = {
+            "path": args.mlp,
+            "config": other.config,
+            "speed": speed(other, body),
+            "surface_weights": surface_weight_error(other, body),
+            "medial_axis": medial_axis_smoothness(other, body),
+        }
     if args.json:
         print(json.dumps(result, indent=2))
         return
@@ -71,22 +90,48 @@ def main() -> None:
         f"{torch.get_num_threads()} threads"
     )
     print(f"  grid (weights + shape dirs)   {s['grid_points_per_s']:,.0f} points/s")
-    if "mlp_points_per_s" in s:
-        print(f"  MLPs (weights + shape dirs)   {s['mlp_points_per_s']:,.0f} points/s")
-        print(f"  grid / MLP speed ratio        {s['grid_speedup']:.1f}x")
+    mlp_file = result.get("mlp_file")
+    mlp_speed = mlp_file["speed"] if mlp_file else s
+    if "mlp_points_per_s" in mlp_speed:
+        print(f"  MLPs (weights + shape dirs)   {mlp_speed['mlp_points_per_s']:,.0f} points/s")
+        ratio = s["grid_points_per_s"] / mlp_speed["mlp_points_per_s"]
+        print(f"  grid / MLP speed ratio        {ratio:.1f}x")
     print(f"  grid forward + backward       {s['grid_with_backward_points_per_s']:,.0f} points/s")
     print(f"  SDF grid                      {s['sdf_points_per_s']:,.0f} points/s")
-    sw = result["surface_weights"]
+    method = fields.config.get("method", "mlp")
     print("skinning weights at the body vertices vs the body's own (L1 over joints)")
-    print(f"  grid  mean {sw['grid_mean_l1']:.4f}  p99 {sw['grid_p99_l1']:.4f}")
-    if "mlp_mean_l1" in sw:
-        print(f"  MLP   mean {sw['mlp_mean_l1']:.4f}  p99 {sw['mlp_p99_l1']:.4f}")
+    rows = [(f"{method} grid", result["surface_weights"], "grid")]
+    if "mlp_mean_l1" in result["surface_weights"]:
+        rows.append(("its MLP", result["surface_weights"], "mlp"))
+    if mlp_file:
+        rows += [("--mlp grid", mlp_file["surface_weights"], "grid")]
+        rows += [("--mlp MLP", mlp_file["surface_weights"], "mlp")]
+    for label, sw, key in rows:
+        print(f"  {label:<12} mean {sw[f'{key}_mean_l1']:.4f}  p99 {sw[f'{key}_p99_l1']:.4f}")
     print("largest weight change along medial-axis segments (L1 per m, 1 mm steps)")
     for name, m in result["medial_axis"].items():
+        extra = ""
+        if mlp_file:
+            extra = f"   --mlp grid {mlp_file['medial_axis'][name]['diffused_max_per_m']:8.1f}"
         print(
-            f"  {name:<15} diffused {m['diffused_max_per_m']:8.1f}   "
-            f"nearest vertex {m['nearest_vertex_max_per_m']:8.1f}"
+            f"  {name:<15} {method} grid {m['diffused_max_per_m']:8.1f}   "
+            f"nearest vertex {m['nearest_vertex_max_per_m']:8.1f}{extra}"
         )
+    g = result["grid_vs_diffusion"]
+    print(
+        f"grid vs the diffusion computed at {g['points']} random points within 3 cm of the "
+        f"surface (N = {g['samples']})"
+    )
+    print(f"  weights L1 mean {g['weights_mean_l1']:.4f}  p99 {g['weights_p99_l1']:.4f}")
+    print(
+        f"  shape dirs mean {g['shape_dirs_mean_abs_m'] * 1000:.4f} mm/beta  "
+        f"p99 {g['shape_dirs_p99_abs_m'] * 1000:.4f} mm/beta"
+    )
+    print(
+        f"  (the reference's own Monte Carlo noise: weights L1 mean "
+        f"{g['reference_noise_weights_mean_l1']:.4f}  p99 "
+        f"{g['reference_noise_weights_p99_l1']:.4f})"
+    )
     d = result["sdf"]
     print(f"SDF grid vs exact, {d['points']} points within 3 cm of the surface")
     print(

@@ -8,6 +8,7 @@ from pathlib import Path
 import click
 from tqdm import tqdm
 
+from usd_garment.atomic import atomic_output
 from usd_garment.body import load_body_model
 from usd_garment.cli.errors import user_errors
 from usd_garment.fields import default_fields_path, load_body_fields, save_body_fields
@@ -32,7 +33,17 @@ def fields() -> None:
     default=None,
     help="Fields file to write (.npz); default: the default body's fields of this install.",
 )
-@click.option("--samples", type=click.IntRange(min=100), default=None, help="Training points.")
+@click.option(
+    "--method",
+    type=click.Choice(["direct", "mlp"]),
+    default="direct",
+    show_default=True,
+    help="direct: the diffusion computed at every grid node; mlp: MLPs fitted to the diffusion "
+    "at sampled points (as in the paper), then baked into the grids.",
+)
+@click.option(
+    "--samples", type=click.IntRange(min=100), default=None, help="Training points (mlp)."
+)
 @click.option(
     "--diffusion-samples",
     type=click.IntRange(min=1),
@@ -40,23 +51,26 @@ def fields() -> None:
     help="N, Gaussian samples averaged per training point.",
 )
 @click.option("--seed", type=int, default=None, help="Random seed.")
-@click.option("--epochs", type=click.IntRange(min=1), default=None, help="Epochs per MLP.")
+@click.option("--epochs", type=click.IntRange(min=1), default=None, help="Epochs per MLP (mlp).")
 def fit(
     body_model: Path | None,
     output: Path | None,
+    method: str,
     samples: int | None,
     diffusion_samples: int | None,
     seed: int | None,
     epochs: int | None,
 ) -> None:
     """Fit the fields of a body model and bake them into grids (needs the [train] extra)."""
+    if method == "direct" and (samples is not None or epochs is not None):
+        raise click.UsageError("--samples and --epochs apply to --method mlp only")
     from usd_garment.fields.fit import fit_body_fields
 
     output = default_fields_path() if output is None else output
     if output.suffix.lower() != ".npz":
         raise click.BadParameter("the output must end in .npz", param_hint="-o")
-    given = {"samples": samples, "diffusion_samples": diffusion_samples, "seed": seed}
-    given["epochs"] = epochs
+    given = {"method": method, "samples": samples, "diffusion_samples": diffusion_samples}
+    given |= {"seed": seed, "epochs": epochs}
     bars: dict[str, tqdm] = {}
 
     def progress(stage: str, done: int, total: int) -> None:
@@ -77,8 +91,9 @@ def fit(
         )
         save_body_fields(output, result)
         config_path = output.with_suffix(".json")
-        with open(config_path, "w") as fh:
+        with atomic_output(config_path) as tmp, tmp.open("w") as fh:
             json.dump(result.config, fh, indent=2)
+            fh.write("\n")
     click.echo(f"wrote {output} and {config_path}")
 
 
@@ -97,6 +112,7 @@ def info(file: Path | None, as_json: bool) -> None:
     for i, level in enumerate(summary["field_levels"]):
         click.echo(
             f"field level {i}      {level['spacing_m'] * 100:g} cm, {level['band_nodes']} nodes"
+            f" ({', '.join(level['groups'])})"
         )
     click.echo(f"field coarse box   {summary['fields_coarse']['spacing_m'] * 100:g} cm")
     sdf = summary["sdf_grid"]
@@ -105,7 +121,8 @@ def info(file: Path | None, as_json: bool) -> None:
         f"{sdf['coarse_spacing_m'] * 100:g} cm box"
     )
     config = summary["config"]
-    keys = ("samples", "diffusion_samples", "epochs", "seed", "final_losses", "timings_s")
+    keys = ("method", "samples", "diffusion_samples", "epochs", "seed", "final_losses")
+    keys += ("timings_s",)
     for key in keys:
         if key in config:
             click.echo(f"{key:<18} {config[key]}")

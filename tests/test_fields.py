@@ -1,5 +1,6 @@
 """Diffused body fields and canonical SDF: the shipped default-body grids against slow references
-(the fitted MLPs, the exact signed distance), and the fitting code path on a tiny closed body."""
+(the diffusion computed directly, the exact signed distance), and both fitting methods on a tiny
+closed body."""
 
 from __future__ import annotations
 
@@ -22,8 +23,8 @@ from usd_garment.fields.grid import DenseGrid, SparseGrid
 pytest.importorskip("warp")
 
 from usd_garment.fields.diffusion import BodySurfaceQuery
-from usd_garment.fields.evaluate import near_surface_points
-from usd_garment.fields.fit import FitConfig, fit_body_fields, mlps_from_state
+from usd_garment.fields.evaluate import grid_vs_diffusion, near_surface_points
+from usd_garment.fields.fit import FieldLevel, FitConfig, fit_body_fields, mlps_from_state
 
 
 @pytest.fixture(scope="module")
@@ -57,8 +58,10 @@ TINY_CONFIG = FitConfig(
     diffusion_samples=8,
     epochs=2,
     batch=256,
-    field_spacings=(0.05,),
-    field_bands=(0.1,),
+    levels=(
+        FieldLevel(0.025, outside=0.04, inside=0.04, groups=("weights",)),
+        FieldLevel(0.05, outside=0.1),
+    ),
     coarse_field_spacing=0.2,
     sdf_spacing=0.02,
     sdf_band=0.04,
@@ -72,6 +75,11 @@ def tiny() -> tuple[BodyModel, BodyFields]:
     return body, fit_body_fields(body, config=TINY_CONFIG)
 
 
+@pytest.fixture(scope="module")
+def tiny_mlp() -> BodyFields:
+    return fit_body_fields(_tiny_body(), config=TINY_CONFIG, method="mlp")
+
+
 def test_weights_are_convex(fields: BodyFields) -> None:
     g = torch.Generator().manual_seed(0)
     pts = (torch.rand(2, 500, 3, generator=g) - 0.5) * torch.tensor([4.0, 4.0, 2.0])
@@ -82,19 +90,22 @@ def test_weights_are_convex(fields: BodyFields) -> None:
 
 
 def test_weights_at_vertices_match_body(fields: BodyFields, body: BodyModel) -> None:
-    # Bounds of the shipped fit (MLPs trained 232 steps each on a shared 2-core CPU; measured:
-    # mean L1 0.38, argmax agreement 0.82); tighten when the fields are refitted longer.
-    err = (fields.weights(body.v_template) - body.weights).abs().sum(-1)
-    assert float(err.mean()) < 0.45
-    same = fields.weights(body.v_template).argmax(-1) == body.weights.argmax(-1)
-    assert float(same.float().mean()) > 0.8
+    # The target: mean L1 <= 0.02 at the body vertices through the shipped grid. The rest is
+    # inherent to the definition (a vertex interpolates nodes a few mm off the surface, whose
+    # diffused values are smoother where the surface weights change fast).
+    w = fields.weights(body.v_template)
+    err = (w - body.weights).abs().sum(-1)
+    assert float(err.mean()) <= 0.02
+    assert float(err.quantile(0.9)) < 0.08
+    same = w.argmax(-1) == body.weights.argmax(-1)
+    assert float(same.float().mean()) > 0.97
 
 
 def test_shape_dirs_at_vertices_match_body(fields: BodyFields, body: BodyModel) -> None:
     s = fields.shape_dirs(body.v_template)
     assert s.shape == (body.num_vertices, 3, 10)
     scale = float(body.shapedirs.abs().mean())
-    assert float((s - body.shapedirs).abs().mean()) < 0.3 * scale
+    assert float((s - body.shapedirs).abs().mean()) < 0.05 * scale
     assert fields.pose_dirs(body.v_template[:4]) is None
 
 
@@ -123,15 +134,14 @@ def test_sdf_matches_exact(fields: BodyFields, body: BodyModel) -> None:
     ).all()
 
 
-def test_grid_matches_mlp(fields: BodyFields, body: BodyModel) -> None:
-    assert fields.mlp_state is not None
-    mlps = mlps_from_state(fields.mlp_state)
-    pts = torch.from_numpy(near_surface_points(body, 3000, seed=6))
-    w, s, _ = fields.all_fields(pts)
-    dw = (w - mlps["weights"].evaluate(pts)).abs().sum(-1)
-    assert float(dw.mean()) < 0.03
-    ds = (s.flatten(1) - mlps["shape_dirs"].evaluate(pts)).abs()
-    assert float(ds.mean()) < 0.1 * float(body.shapedirs.abs().mean())
+def test_grid_matches_diffusion(fields: BodyFields, body: BodyModel) -> None:
+    # Reference: the paper's diffusion (N = 256) computed directly at random points within 3 cm
+    # of the surface; the gap includes the reference's own Monte Carlo noise.
+    assert fields.mlp_state is None and fields.config["method"] == "direct"
+    g = grid_vs_diffusion(fields, body, count=1500, seed=6)
+    assert g["weights_mean_l1"] < 0.03
+    assert g["weights_p99_l1"] < 0.25
+    assert g["shape_dirs_mean_abs_m"] < 0.05 * float(body.shapedirs.abs().mean())
 
 
 def test_gradients_flow_to_points(fields: BodyFields, body: BodyModel) -> None:
@@ -178,6 +188,11 @@ def test_diffusion_at_surface_is_the_surface_value() -> None:
 
 def test_tiny_fit_and_round_trip(tiny: tuple[BodyModel, BodyFields], tmp_path: Path) -> None:
     body, fitted = tiny
+    assert fitted.mlp_state is None
+    assert [level.names for level in fitted.field_levels] == [
+        ("weights",),
+        ("weights", "shape_dirs", "pose_dirs"),
+    ]
     pts = body.v_template[:50]
     w, s, p = fitted.all_fields(pts)
     assert w.shape == (50, NUM_JOINTS) and s.shape == (50, 3, 10)
@@ -187,7 +202,8 @@ def test_tiny_fit_and_round_trip(tiny: tuple[BodyModel, BodyFields], tmp_path: P
     path = tmp_path / "tiny_fields.npz"
     save_body_fields(path, fitted)
     loaded = load_body_fields(path)
-    assert loaded.body_name == "tiny" and loaded.config["samples"] == TINY_CONFIG.samples
+    assert loaded.body_name == "tiny" and loaded.config["method"] == "direct"
+    assert "samples" not in loaded.config  # an mlp-only setting
     torch.testing.assert_close(loaded.weights(pts), w, atol=2e-3, rtol=0)
     torch.testing.assert_close(loaded.pose_dirs(pts), p, atol=1e-5, rtol=1e-2)
     torch.testing.assert_close(loaded.sdf(pts), fitted.sdf(pts), atol=1e-4, rtol=0)
@@ -201,9 +217,67 @@ def test_cli_info(tmp_path: Path) -> None:
     result = runner.invoke(main, ["fields", "info", "--json"])
     assert result.exit_code == 0, result.output
     summary = json.loads(result.output)
-    assert summary["pose_dirs"] is False and summary["has_mlp"]
+    assert summary["pose_dirs"] is False and not summary["has_mlp"]
+    assert summary["field_levels"][0]["groups"] == ["weights"]
     bad = tmp_path / "bad.npz"
     bad.write_bytes(b"not a zip")
     result = runner.invoke(main, ["fields", "info", str(bad)])
     assert result.exit_code == 1 and "Traceback" not in result.output
     assert "cannot read body fields" in result.output
+
+
+def test_tiny_mlp_fit(tiny_mlp: BodyFields, tmp_path: Path) -> None:
+    fitted = tiny_mlp
+    assert fitted.mlp_state is not None and fitted.config["samples"] == TINY_CONFIG.samples
+    path = tmp_path / "tiny_mlp.npz"
+    save_body_fields(path, fitted)
+    mlps = mlps_from_state(load_body_fields(path).mlp_state or {})
+    assert set(mlps) == {"weights", "shape_dirs", "pose_dirs"}
+    # The baked grid reproduces its MLP at nodes of the finest weights level.
+    finest = fitted.field_levels[0]
+    nodes = finest.origin + finest.spacing * finest.mask.nonzero()[:40].float()
+    interior = finest(nodes, ("weights",))[1]
+    assert interior.any()
+    w = fitted.weights(nodes[interior])
+    gap = (w - mlps["weights"].evaluate(nodes[interior])).abs().sum(-1)
+    assert float(gap.max()) < 0.02  # the 5e-4 weight floor
+
+
+def test_diffuse_is_the_diffusion_operator() -> None:
+    body = _tiny_body()
+    query = BodySurfaceQuery(body.v_template.numpy(), body.faces.numpy())
+    pts = body.v_template.numpy()[::5] * 1.3
+    values = body.weights.numpy()
+    op = query.diffusion_matrix(pts, 32, np.random.default_rng(3))
+    out = query.diffuse(pts, values, 32, np.random.default_rng(3), chunk=len(pts))
+    np.testing.assert_allclose(out, op @ values, atol=1e-6)
+
+
+def test_fit_rejects_unknown_method() -> None:
+    with pytest.raises(ValueError, match="unknown fitting method"):
+        fit_body_fields(_tiny_body(), config=TINY_CONFIG, method="spline")
+
+
+def test_levels_blend_without_seams() -> None:
+    # A band holding 1 (x < 0.9 m) over a coarse grid holding 0: the value ramps over the band's
+    # outermost cell instead of jumping where the band ends.
+    shape = (20, 4, 4)
+    mask = torch.zeros(shape, dtype=torch.bool)
+    mask[:10] = True
+    origin = torch.zeros(3)
+    count = int(mask.sum())
+    ones = {"weights": torch.ones(count, NUM_JOINTS), "shape_dirs": torch.ones(count, 30)}
+    zeros = {"weights": torch.ones(*shape, NUM_JOINTS), "shape_dirs": torch.zeros(*shape, 30)}
+    sdf = {"sdf": torch.zeros(*shape, 1)}
+    fields = BodyFields(
+        [SparseGrid(origin, 0.1, mask, ones)],
+        DenseGrid(origin, 0.1, zeros),
+        SparseGrid(origin, 0.1, mask, {"sdf": torch.zeros(count, 1)}),
+        DenseGrid(origin, 0.1, sdf),
+        "blocks",
+    )
+    x = torch.linspace(0.12, 1.5, 1381)
+    pts = torch.stack([x, torch.full_like(x, 0.15), torch.full_like(x, 0.15)], dim=1)
+    s = fields.shape_dirs(pts)[:, 0, 0]
+    assert float(s[x < 0.79].min()) > 1 - 1e-5 and float(s[x > 0.91].abs().max()) < 1e-5
+    assert float(s.diff().abs().max()) < 0.011  # 1 mm steps across a 10 cm ramp

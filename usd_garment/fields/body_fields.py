@@ -32,24 +32,38 @@ def default_fields_path() -> Path:
     return Path(str(resources.files("usd_garment") / "data" / "fields" / DEFAULT_FIELDS_FILE))
 
 
+def _add_rows(
+    acc: list[torch.Tensor] | None, rows: torch.Tensor, parts: list[torch.Tensor]
+) -> list[torch.Tensor]:
+    """``acc`` (``(M, C)`` tensors) plus ``parts`` ``(R, C)`` at the distinct ``rows`` ``(R,)``;
+    None stands for the first term, whose rows are all M."""
+    if acc is None:
+        return parts
+    return [a.index_put((rows,), a[rows] + p) for a, p in zip(acc, parts, strict=True)]
+
+
 class BodyFields(torch.nn.Module):
     """Diffused skinning fields of one body model in its canonical space (β = 0, T-pose).
 
     Fields live in sparse grids over bands around the body (finer near it) and a coarse dense
-    grid over the whole box (used beyond the bands; clamped beyond the box). The SDF lives in a fine
-    sparse grid near the surface and a coarse dense grid; beyond the coarse box it returns the
-    box's boundary value plus the distance to the box (an upper bound, so conservative).
+    grid over the whole box (used beyond the bands; clamped beyond the box); each band is
+    blended into the coarser grids over its outermost cell, so the fields have no seams. The
+    SDF lives in a fine sparse grid near the surface and a coarse dense grid; beyond the coarse
+    box it returns the box's boundary value plus the distance to the box (an upper bound, so
+    conservative).
 
     Args:
-        field_levels: sparse grids, finest first, each with groups ``weights`` (24),
-            ``shape_dirs`` (30) and optionally ``pose_dirs`` (621); a point reads the finest
-            level whose band holds its cell.
+        field_levels: sparse grids, finest first, each with some of the groups ``weights`` (24),
+            ``shape_dirs`` (30) and ``pose_dirs`` (621, optional); for each group a point reads
+            the finest level holding that group whose band holds its cell (so the smooth
+            blendshape fields can live on coarser levels than the weights).
         fields_coarse: dense grid with the same groups, for points outside every band.
         sdf_fine: sparse grid with group ``sdf`` (1).
         sdf_coarse: dense grid with group ``sdf`` (1).
         body_name: name of the body model the fields were fitted to.
         config: how the fields were made (JSON-serialisable).
-        mlp_state: optional state of the fitted MLPs (kept for reference evaluations).
+        mlp_state: state of the fitted MLPs when the grids were baked from MLPs (kept for
+            reference evaluations); None for grids baked directly from the diffusion.
     """
 
     def __init__(
@@ -76,32 +90,42 @@ class BodyFields(torch.nn.Module):
         return "pose_dirs" in self.fields_coarse.names
 
     def _fields(self, points: torch.Tensor, names: tuple[str, ...]) -> list[torch.Tensor]:
-        """Values ``(..., N, C)`` of field groups at points ``(..., N, 3)``."""
+        """Values ``(..., N, C)`` of field groups at points ``(..., N, 3)``. Groups stored on the
+        same levels are looked up together."""
         lead = points.shape[:-1]
         flat = points.reshape(-1, 3).to(self.fields_coarse.origin)
-        values: list[torch.Tensor] | None = None
-        todo = torch.arange(flat.shape[0], device=flat.device)
-        for level in self.field_levels:
-            level_values, valid = level(flat[todo], names)
-            if values is None:
-                values = level_values
-            else:
-                rows = todo[valid]
-                values = [
-                    v.index_put((rows,), lv[valid])
-                    for v, lv in zip(values, level_values, strict=True)
-                ]
-            todo = todo[~valid]
+        by_levels: dict[tuple[int, ...], list[str]] = {}
+        for name in names:
+            held = tuple(i for i, level in enumerate(self.field_levels) if name in level.names)
+            by_levels.setdefault(held, []).append(name)
+        found: dict[str, torch.Tensor] = {}
+        for held, group in by_levels.items():
+            levels = [self.field_levels[i] for i in held]
+            found |= dict(zip(group, self._cascade(flat, tuple(group), levels), strict=True))
+        return [found[n].reshape(*lead, found[n].shape[-1]) for n in names]
+
+    def _cascade(
+        self, flat: torch.Tensor, names: tuple[str, ...], levels: list[SparseGrid]
+    ) -> list[torch.Tensor]:
+        """Values ``(M, C)`` of groups at points ``(M, 3)``: each level's values blended over the
+        coarser ones' with its blend weight (1 inside its band, falling to 0 over the band's
+        outermost cell, so there is no seam where a band ends); the coarse dense grid last."""
+        m = flat.shape[0]
+        acc: list[torch.Tensor] | None = None
+        remaining = flat.new_ones(m)  # weight left for coarser levels
+        todo = torch.arange(m, device=flat.device)
+        for level in levels:
+            level_values, alpha = level.blended(flat[todo], names)
+            share = remaining[todo] * alpha
+            acc = _add_rows(acc, todo, [share[:, None] * v for v in level_values])
+            remaining = remaining.index_put((todo,), remaining[todo] * (1 - alpha))
+            todo = todo[alpha < 1]
             if not todo.numel():
                 break
-        if values is None or todo.numel():
+        if acc is None or todo.numel():
             coarse = self.fields_coarse(flat[todo], names)
-            values = (
-                coarse
-                if values is None
-                else [v.index_put((todo,), c) for v, c in zip(values, coarse, strict=True)]
-            )
-        return [v.reshape(*lead, v.shape[-1]) for v in values]
+            acc = _add_rows(acc, todo, [remaining[todo, None] * c for c in coarse])
+        return acc
 
     def weights(self, points: torch.Tensor) -> torch.Tensor:
         """Diffused skinning weights ``(..., N, 24)`` at points ``(..., N, 3)``; rows are ≥ 0 and
@@ -170,6 +194,7 @@ class BodyFields(torch.nn.Module):
                     "spacing_m": level.spacing,
                     "lattice": list(level.shape),
                     "band_nodes": int(level.mask.sum()),
+                    "groups": list(level.names),
                 }
                 for level in self.field_levels
             ],
@@ -237,7 +262,7 @@ def _unpack_dense(prefix: str, data: dict[str, np.ndarray]) -> DenseGrid:
 
 
 def save_body_fields(path: str | Path, fields: BodyFields) -> None:
-    """Write ``fields`` as a compressed ``.npz`` (grid values and MLP state in float16),
+    """Write ``fields`` as a compressed ``.npz`` (grid values and any MLP state in float16),
     atomically."""
     out: dict[str, np.ndarray] = {
         "version": np.array(FORMAT_VERSION),

@@ -128,31 +128,39 @@ class BodySurfaceQuery:
         )
 
     def diffusion_matrix(
-        self,
-        points: np.ndarray,
-        samples: int,
-        rng: np.random.Generator,
-        progress: Callable[[int], None] | None = None,
-        chunk: int = 4096,
+        self, points: np.ndarray, samples: int, rng: np.random.Generator
     ) -> scipy.sparse.csr_matrix:
         """Sparse ``(M, V)`` matrix of the paper's diffusion operator: row m averages the
         barycentric interpolation at the closest surface points φ(q_n) of ``samples`` points
         q_n ~ N(p_m, d_m² I), d_m the distance of p_m to the surface (d is the standard
-        deviation). ``progress`` receives the number of points done after each chunk."""
-        blocks = []
+        deviation)."""
+        d = np.linalg.norm(points - self.closest_points(points), axis=1)  # (M,)
+        q = points[:, None, :] + d[:, None, None] * rng.standard_normal((len(points), samples, 3))
+        interp = self.interpolation_matrix(q.reshape(-1, 3).astype(np.float32))
+        rows = np.repeat(np.arange(len(points)), samples)
+        average = scipy.sparse.csr_matrix(
+            (np.full(len(rows), 1.0 / samples), (rows, np.arange(len(rows)))),
+            shape=(len(points), len(rows)),
+        )
+        return (average @ interp).tocsr()
+
+    def diffuse(
+        self,
+        points: np.ndarray,
+        values: np.ndarray,
+        samples: int,
+        rng: np.random.Generator,
+        progress: Callable[[int], None] | None = None,
+        chunk: int = 4096,
+    ) -> np.ndarray:
+        """The diffused field ``(M, C)`` float32 of per-vertex ``values`` ``(V, C)`` at
+        ``points`` ``(M, 3)``: :meth:`diffusion_matrix` applied chunk by chunk (so the operator
+        of many points is never held at once). ``progress`` receives the number of points done
+        after each chunk."""
+        out = np.empty((len(points), values.shape[1]), dtype=np.float32)
         for start in range(0, len(points), chunk):
             p = points[start : start + chunk]
-            d = np.linalg.norm(p - self.closest_points(p), axis=1)  # (m,)
-            q = p[:, None, :] + d[:, None, None] * rng.standard_normal((len(p), samples, 3))
-            interp = self.interpolation_matrix(q.reshape(-1, 3).astype(np.float32))
-            average = scipy.sparse.csr_matrix(
-                (
-                    np.full(len(p) * samples, 1.0 / samples),
-                    (np.repeat(np.arange(len(p)), samples), np.arange(len(p) * samples)),
-                ),
-                shape=(len(p), len(p) * samples),
-            )
-            blocks.append(average @ interp)
+            out[start : start + len(p)] = self.diffusion_matrix(p, samples, rng) @ values
             if progress is not None:
                 progress(len(p))
-        return scipy.sparse.vstack(blocks).tocsr()
+        return out

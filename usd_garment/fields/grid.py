@@ -3,13 +3,16 @@ body fields and of the canonical body SDF.
 
 A :class:`SparseGrid` stores values only at the lattice nodes of a band (a boolean mask over a
 regular lattice); a :class:`DenseGrid` stores every node of a box. Both interpolate with a gather
-of the 8 cell corners, so gradients flow to the query points through the trilinear weights.
+of the 8 cell corners, so gradients flow to the query points through the trilinear weights. A
+sparse grid also gives a blend weight that falls continuously to 0 at the edge of its band, so
+that nested grids can be blended without seams.
 Shapes: M query points, C channels; positions in metres.
 """
 
 from __future__ import annotations
 
 import torch
+import torch.nn.functional as F
 
 
 def _cell_and_weights(
@@ -94,6 +97,7 @@ class SparseGrid(torch.nn.Module):
 
     origin: torch.Tensor
     index: torch.Tensor
+    inner: torch.Tensor
 
     def __init__(
         self,
@@ -114,6 +118,10 @@ class SparseGrid(torch.nn.Module):
         index[flat] = torch.arange(count)
         self.register_buffer("origin", torch.as_tensor(origin, dtype=torch.float32))
         self.register_buffer("index", index)
+        # 1 at masked nodes whose 26 neighbours are all masked, else 0.
+        outside = F.pad((~mask.bool()).float()[None, None], (1,) * 6, value=1.0)
+        eroded = F.max_pool3d(outside, 3, stride=1)[0, 0] == 0
+        self.register_buffer("inner", eroded.reshape(-1)[flat].float()[:, None])
         _register_channels(self, channels)
 
     def channel(self, name: str) -> torch.Tensor:
@@ -131,10 +139,27 @@ class SparseGrid(torch.nn.Module):
         """Interpolated values ``(M, C)`` of each named group at points ``(M, 3)``, and ``(M,)``
         bool: whether the point lies in the lattice and all 8 corners of its cell hold values
         (rows where it is False are meaningless)."""
+        values, valid, _ = self._lookup(points, names, blend=False)
+        return values, valid
+
+    def blended(
+        self, points: torch.Tensor, names: tuple[str, ...]
+    ) -> tuple[list[torch.Tensor], torch.Tensor]:
+        """Like :meth:`forward`, with ``(M,)`` blend weights instead of the validity: the
+        interpolation of 1 at the nodes inside the band (all 26 neighbours masked) and 0 at
+        its edge nodes; continuous, 1 deep in the band, 0 where the point is not valid."""
+        values, valid, alpha = self._lookup(points, names, blend=True)
+        return values, alpha * valid
+
+    def _lookup(
+        self, points: torch.Tensor, names: tuple[str, ...], blend: bool
+    ) -> tuple[list[torch.Tensor], torch.Tensor, torch.Tensor]:
         flat, w = _cell_and_weights(points, self.origin, self.spacing, self.shape)
         rows = self.index[flat]  # (M, 8)
         upper = torch.tensor(self.shape, dtype=points.dtype, device=points.device) - 1
         g = (points.detach() - self.origin) / self.spacing
         valid = (rows >= 0).all(-1) & ((g >= 0) & (g <= upper)).all(-1)
         rows = rows.clamp_min(0)
-        return [_interpolate(w, self.channel(n), rows) for n in names], valid
+        values = [_interpolate(w, self.channel(n), rows) for n in names]
+        alpha = _interpolate(w, self.inner, rows)[:, 0] if blend else valid.to(points.dtype)
+        return values, valid, alpha
