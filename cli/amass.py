@@ -8,8 +8,8 @@ from pathlib import Path
 import click
 
 from usd_garment.body import load_body_model
-from usd_garment.cli.body import body_model_option
 from usd_garment.cli.errors import user_errors
+from usd_garment.cli.options import body_model_option, skeleton_option
 from usd_garment.motion.amass import load_amass, save_amass
 from usd_garment.usd.body_layer import write_body_layer
 from usd_garment.usd.read import read_smpl_motion
@@ -53,7 +53,7 @@ def import_amass(npz: Path, output: Path, fps: float | None, body_model: Path | 
     required=True,
     help="AMASS-style .npz to write.",
 )
-@click.option("--skeleton", default=None, help="Prim path of the Skeleton, if there are several.")
+@skeleton_option
 @body_model_option
 def export_amass(usd: Path, output: Path, skeleton: str | None, body_model: Path | None) -> None:
     """Write the SMPL motion of a USD skeleton as an AMASS .npz (Z-up, SMPL-H layout)."""

@@ -11,17 +11,12 @@ import torch
 import trimesh
 
 from usd_garment.atomic import atomic_output
-from usd_garment.body import NUM_BETAS, default_body_path, load_body_model
+from usd_garment.body import default_body_path, load_body_model
 from usd_garment.body.anny_convert import build_default_body
+from usd_garment.body.betas import as_betas
 from usd_garment.body.measure import body_summary
 from usd_garment.cli.errors import user_errors
-
-body_model_option = click.option(
-    "--body-model",
-    type=click.Path(dir_okay=False, path_type=Path),
-    default=None,
-    help="SMPL-layout body file (.npz/.pkl); default: the embedded free body.",
-)
+from usd_garment.cli.options import body_model_option, json_option, parse_betas
 
 
 @click.group()
@@ -31,7 +26,7 @@ def body() -> None:
 
 @body.command("info")
 @body_model_option
-@click.option("--json", "as_json", is_flag=True, help="Print a JSON summary.")
+@json_option()
 def info(body_model: Path | None, as_json: bool) -> None:
     """Vertex, face and joint counts, joint names and heights of a body model."""
     with user_errors():
@@ -49,14 +44,18 @@ def info(body_model: Path | None, as_json: bool) -> None:
     click.echo(f"height over beta1 in [-2, 2]   {lo:.3f} .. {hi:.3f} m")
 
 
-def _parse_betas(text: str | None) -> np.ndarray:
-    betas = np.zeros(NUM_BETAS, dtype=np.float32)
-    if text:
-        values = [float(x) for x in text.replace(",", " ").split()]
-        if len(values) > NUM_BETAS:
-            raise click.BadParameter(f"at most {NUM_BETAS} values", param_hint="--betas")
-        betas[: len(values)] = values
-    return betas
+def _first_pose(path: Path) -> np.ndarray:
+    """``(24, 3)`` axis-angles of the first frame of ``path``'s ``poses`` (T, ≥66) array."""
+    with np.load(path) as data:
+        if "poses" not in data.files:
+            raise ValueError(f"{path}: no 'poses' array")
+        poses = np.asarray(data["poses"], dtype=np.float32)
+    poses = poses.reshape(-1, poses.shape[-1])
+    if poses.shape[1] < 66:
+        raise ValueError(f"{path}: 'poses' needs at least 66 values per frame")
+    pose = np.zeros((24, 3), dtype=np.float32)
+    pose[: min(24, poses.shape[1] // 3)] = poses[0, :72].reshape(-1, 3)
+    return pose
 
 
 @body.command("export")
@@ -66,7 +65,7 @@ def _parse_betas(text: str | None) -> np.ndarray:
     "--pose-npz",
     type=click.Path(exists=True, dir_okay=False, path_type=Path),
     default=None,
-    help="npz with 'poses' (72+ axis-angle values, first frame used) and optional 'trans'.",
+    help="npz with 'poses' (T, 66+ SMPL axis-angles, Y-up); the first frame is used.",
 )
 @click.option(
     "-o",
@@ -79,19 +78,15 @@ def export(body_model: Path | None, betas: str | None, pose_npz: Path | None, ou
     """Write the (shaped, posed) body as a mesh file through trimesh."""
     if output.suffix.lower() not in (".obj", ".ply"):
         raise click.BadParameter("the output must end in .obj or .ply", param_hint="-o")
-    pose = np.zeros((1, 24, 3), dtype=np.float32)
-    if pose_npz is not None:
-        with np.load(pose_npz) as data:
-            if "poses" not in data.files:
-                raise click.ClickException(f"{pose_npz}: no 'poses' array")
-            poses = np.asarray(data["poses"], dtype=np.float32).reshape(-1, data["poses"].shape[-1])
-            if poses.shape[1] < 66:
-                raise click.ClickException(f"{pose_npz}: 'poses' needs at least 66 values")
-            pose[0, : min(24, poses.shape[1] // 3)] = poses[0, :72].reshape(-1, 3)
+    values = parse_betas(betas)
+    shape = torch.tensor(as_betas(values if values is not None else []), dtype=torch.float32)
     with user_errors():
+        pose = torch.zeros(1, 24, 3)
+        if pose_npz is not None:
+            pose[0] = torch.from_numpy(_first_pose(pose_npz))
         model = load_body_model(body_model)
         with torch.no_grad():
-            out = model(torch.from_numpy(_parse_betas(betas))[None], torch.from_numpy(pose))
+            out = model(shape[None], pose)
         mesh = trimesh.Trimesh(out.vertices[0].numpy(), model.faces.numpy(), process=False)
         with atomic_output(output) as tmp:
             mesh.export(tmp)

@@ -9,6 +9,7 @@ from pathlib import Path
 import click
 
 from usd_garment.cli.errors import user_errors
+from usd_garment.cli.options import body_model_option, json_option, skeleton_option
 from usd_garment.eval.evaluate import evaluate_layer
 
 #: Rows of the summary table: key, label, format.
@@ -45,17 +46,10 @@ def _cell(value: float | int | None, fmt: str) -> str:
     help="Another garment layer to measure the distance to (e.g. a simulation).",
 )
 @click.option("--garment", default=None, help="Garment mesh name when the layer has several.")
-@click.option(
-    "--body-model",
-    type=click.Path(dir_okay=False, path_type=Path),
-    default=None,
-    help="SMPL-layout body file (.npz/.pkl); default: the embedded free body.",
-)
-@click.option("--skeleton", default=None, help="Skeleton prim path when the stage has several.")
+@body_model_option
+@skeleton_option
 @click.option("--per-frame", is_flag=True, help="Also print one row per frame.")
-@click.option(
-    "--json", "as_json", is_flag=True, help="Print summary and per-frame figures as JSON."
-)
+@json_option("Print summary and per-frame figures as JSON.")
 def evaluate(
     garment_layer: Path,
     body_input: Path,

@@ -11,6 +11,7 @@ from tqdm import tqdm
 from usd_garment.atomic import atomic_output
 from usd_garment.body import load_body_model
 from usd_garment.cli.errors import user_errors
+from usd_garment.cli.options import body_model_option, json_option
 from usd_garment.fields import default_fields_path, load_body_fields, save_body_fields
 
 
@@ -20,12 +21,7 @@ def fields() -> None:
 
 
 @fields.command("fit")
-@click.option(
-    "--body-model",
-    type=click.Path(dir_okay=False, path_type=Path),
-    default=None,
-    help="SMPL-layout body file (.npz/.pkl); default: the embedded free body.",
-)
+@body_model_option
 @click.option(
     "-o",
     "--output",
@@ -99,7 +95,7 @@ def fit(
 
 @fields.command("info")
 @click.argument("file", type=click.Path(dir_okay=False, path_type=Path), required=False)
-@click.option("--json", "as_json", is_flag=True, help="Print a JSON summary.")
+@json_option()
 def info(file: Path | None, as_json: bool) -> None:
     """Grids, sizes and fitting settings of a fields file (default: the default body's)."""
     with user_errors():

@@ -8,8 +8,8 @@ from pathlib import Path
 import click
 
 from usd_garment.body import load_body_model
-from usd_garment.cli.body import body_model_option
 from usd_garment.cli.errors import user_errors
+from usd_garment.cli.options import body_model_option, json_option, lod_option
 from usd_garment.garment.library import (
     Provenance,
     body_fingerprint,
@@ -31,9 +31,9 @@ def garment() -> None:
 
 @garment.command("info")
 @click.argument("name", type=click.Choice(GARMENT_NAMES))
-@click.option("--lod", type=click.Choice(tuple(LODS)), default="high", show_default=True)
+@lod_option
 @body_model_option
-@click.option("--json", "as_json", is_flag=True, help="Print a JSON summary.")
+@json_option()
 def info(name: str, lod: str, body_model: Path | None, as_json: bool) -> None:
     """Vertices, faces, boundary loops and clearance to the rest body of a garment template."""
     with user_errors():

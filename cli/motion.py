@@ -8,8 +8,8 @@ import click
 import numpy as np
 
 from usd_garment.body import NUM_BETAS, load_body_model
-from usd_garment.cli.body import body_model_option
 from usd_garment.cli.errors import user_errors
+from usd_garment.cli.options import body_model_option
 from usd_garment.motion.procedural import MOTION_KINDS, make_motion, random_betas
 from usd_garment.usd.body_layer import write_body_layer
 

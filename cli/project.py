@@ -7,12 +7,12 @@ from pathlib import Path
 
 import click
 import numpy as np
-from tqdm import tqdm
 
 from usd_garment.canonical.project_layers import project_layers
 from usd_garment.canonical.projection import ProjectionSettings
 from usd_garment.cli.errors import user_errors
-from usd_garment.garment.template import GARMENT_NAMES, LODS
+from usd_garment.cli.options import FrameProgress, body_model_option, lod_option
+from usd_garment.garment.template import GARMENT_NAMES
 
 
 @click.command("project")
@@ -35,7 +35,7 @@ from usd_garment.garment.template import GARMENT_NAMES, LODS
     help="Canonical training set to write (.npz).",
 )
 @click.option("--garment", type=click.Choice(GARMENT_NAMES), default="tshirt", show_default=True)
-@click.option("--lod", type=click.Choice(tuple(LODS)), default="high", show_default=True)
+@lod_option
 @click.option(
     "--iterations",
     type=click.IntRange(0),
@@ -50,12 +50,7 @@ from usd_garment.garment.template import GARMENT_NAMES, LODS
     show_default=True,
     help="Frames optimised together, each warm-started from the last solved frame.",
 )
-@click.option(
-    "--body-model",
-    type=click.Path(dir_okay=False, path_type=Path),
-    default=None,
-    help="SMPL-layout body file (.npz/.pkl); default: the embedded free body.",
-)
+@body_model_option
 @click.option(
     "--fields",
     type=click.Path(path_type=Path),
@@ -75,26 +70,12 @@ def project(
 ) -> None:
     """Project the simulated garments of SIM_LAYER... to canonical space; write OUTPUT."""
     settings = ProjectionSettings(iterations=iterations, chunk=chunk)
-    bar: tqdm | None = None
-
-    def on_read(total: int) -> None:
-        nonlocal bar
-        bar = tqdm(total=total, desc="project", unit="frame", leave=False, disable=None)
-
-    def progress(done: int) -> None:
-        if bar is not None:
-            bar.update(done - bar.n)
-
-    try:
-        with user_errors():
-            data = project_layers(
-                sim_layers, body_layers, output, garment=garment, lod=lod,
-                body_model=body_model, fields=fields, settings=settings,
-                on_read=on_read, progress=progress,
-            )  # fmt: skip
-    finally:
-        if bar is not None:
-            bar.close()
+    with FrameProgress("project") as bar, user_errors():
+        data = project_layers(
+            sim_layers, body_layers, output, garment=garment, lod=lod,
+            body_model=body_model, fields=fields, settings=settings,
+            on_read=bar.on_read, progress=bar.progress,
+        )  # fmt: skip
     seconds = float(data.metadata["seconds"])
     frames = len(data.canonical)
     mean_mm, max_mm = 1e3 * float(np.mean(data.error)), 1e3 * float(np.max(data.max_error))

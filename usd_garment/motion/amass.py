@@ -15,6 +15,7 @@ import torch
 from scipy.spatial.transform import Rotation
 
 from usd_garment.atomic import atomic_output
+from usd_garment.body.betas import as_betas
 from usd_garment.body.joints import NUM_BETAS, NUM_JOINTS
 from usd_garment.body.model import BodyModel
 from usd_garment.motion.resample import resample_motion
@@ -90,12 +91,10 @@ def load_amass(path: str | Path, body: BodyModel, fps: float | None = None) -> S
     src_fps = float(raw[rate_key])
     if not np.isfinite(src_fps) or src_fps <= 0:
         raise AmassError(f"{path}: frame rate must be positive, got {src_fps}")
-    betas = np.zeros(NUM_BETAS)
-    if "betas" in raw:
-        b = np.asarray(raw["betas"], dtype=np.float64).reshape(-1)[:NUM_BETAS]
-        betas[: b.size] = b
-    if not np.isfinite(betas).all():
-        raise AmassError(f"{path}: 'betas' contain NaN or infinite values")
+    try:
+        betas = as_betas(raw.get("betas", []))
+    except ValueError as exc:
+        raise AmassError(f"{path}: {exc}") from None
 
     t = poses.shape[0]
     pose = np.zeros((t, NUM_JOINTS, 3))

@@ -21,6 +21,7 @@ import torch
 from pxr import Tf, Usd, UsdGeom, UsdSkel
 from scipy.spatial.transform import Rotation
 
+from usd_garment.body.betas import as_betas
 from usd_garment.body.joints import NUM_BETAS, NUM_JOINTS, SMPL_JOINT_NAMES, SMPL_PARENTS
 from usd_garment.body.model import BodyModel
 from usd_garment.motion.sequence import SmplMotion
@@ -306,9 +307,7 @@ def _betas(
     if values is None:
         warnings.warn(f"{where}: no smpl:betas on the Skeleton, using zeros", stacklevel=3)
         values = np.zeros(NUM_BETAS)
-    values = np.asarray(values, dtype=np.float64).reshape(-1)
-    if not np.isfinite(values).all():
-        raise UsdInputError(f"{where}: betas contain NaN or infinite values")
-    out = np.zeros(NUM_BETAS)
-    out[: min(NUM_BETAS, values.size)] = values[:NUM_BETAS]
-    return out
+    try:
+        return as_betas(values)
+    except ValueError as exc:
+        raise UsdInputError(f"{where}: {exc}") from None

@@ -1,0 +1,91 @@
+"""Options and progress display shared by several commands, so each is declared once."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from types import TracebackType
+from typing import Any, TypeVar
+
+import click
+import numpy as np
+from tqdm import tqdm
+
+from usd_garment.garment.template import LODS
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+body_model_option = click.option(
+    "--body-model",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="SMPL-layout body file (.npz/.pkl); default: the embedded free body.",
+)
+skeleton_option = click.option(
+    "--skeleton", default=None, help="Skeleton prim path when the stage has several."
+)
+lod_option = click.option(
+    "--lod", type=click.Choice(tuple(LODS)), default="high", show_default=True,
+    help="Garment level of detail.",
+)  # fmt: skip
+frames_option = click.option(
+    "--frames", default=None, help="Frames A:B of the stage's range (B exclusive)."
+)
+
+
+def json_option(help_text: str = "Print a JSON summary on stdout.") -> Callable[[F], F]:
+    """The ``--json`` flag, stored as ``as_json``."""
+    return click.option("--json", "as_json", is_flag=True, help=help_text)
+
+
+def parse_frames(text: str | None) -> tuple[int, int] | None:
+    """``"A:B"`` → ``(A, B)`` (frames A .. B-1 of the stage's range)."""
+    if text is None:
+        return None
+    try:
+        a, b = (int(x) for x in text.split(":"))
+    except ValueError:
+        raise click.BadParameter("expected A:B, e.g. 0:100", param_hint="--frames") from None
+    if not 0 <= a < b:
+        raise click.BadParameter("expected 0 <= A < B", param_hint="--frames")
+    return a, b
+
+
+class FrameProgress:
+    """A progress bar (stderr, terminals only) that the library opens through ``on_read`` once
+    it knows the frame count and advances through ``progress(done)``; closed on exit."""
+
+    def __init__(self, desc: str, unit: str = "frame") -> None:
+        self.desc, self.unit = desc, unit
+        self.bar: tqdm | None = None
+
+    def on_read(self, total: int) -> None:
+        self.bar = tqdm(total=total, desc=self.desc, unit=self.unit, leave=False, disable=None)
+
+    def progress(self, done: int) -> None:
+        if self.bar is not None:
+            self.bar.update(done - self.bar.n)
+
+    def __enter__(self) -> FrameProgress:
+        return self
+
+    def __exit__(
+        self, kind: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+def parse_betas(text: str | None) -> np.ndarray | None:
+    """``--betas``: 1 to 16 comma- or space-separated finite numbers, or None."""
+    if text is None:
+        return None
+    try:
+        values = np.asarray([float(x) for x in text.replace(",", " ").split()])
+    except ValueError:
+        raise click.BadParameter(
+            "expected numbers, e.g. '1.5,-0.5'", param_hint="--betas"
+        ) from None
+    if not 1 <= values.size <= 16 or not np.isfinite(values).all():
+        raise click.BadParameter("give 1 to 16 finite values", param_hint="--betas")
+    return values
