@@ -7,12 +7,15 @@ import click
 from usd_garment import __version__
 from usd_garment.cli.amass import export_amass, import_amass
 from usd_garment.cli.body import body
+from usd_garment.cli.dataset import dataset
+from usd_garment.cli.drape import drape
 from usd_garment.cli.dress import dress
 from usd_garment.cli.evaluate import evaluate
 from usd_garment.cli.fields import fields
 from usd_garment.cli.garment import garment
 from usd_garment.cli.motion import motion
 from usd_garment.cli.project import project
+from usd_garment.cli.simulate import simulate
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -23,10 +26,13 @@ def main() -> None:
 
 main.add_command(body)
 main.add_command(garment)
+garment.add_command(drape)
 main.add_command(import_amass)
 main.add_command(export_amass)
 main.add_command(dress)
 main.add_command(evaluate)
+main.add_command(simulate)
+main.add_command(dataset)
 main.add_command(motion)
 main.add_command(fields)
 main.add_command(project)

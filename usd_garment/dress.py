@@ -14,7 +14,7 @@ import numpy as np
 from usd_garment.body.io import load_body_model
 from usd_garment.garment.library import load_template
 from usd_garment.garment.template import GARMENT_NAMES, LODS, GarmentTemplate
-from usd_garment.methods import get_method
+from usd_garment.methods import GarmentMethod, get_method
 from usd_garment.usd.garment_layer import (
     CLIP_THRESHOLD,
     GarmentFrames,
@@ -62,7 +62,7 @@ def dress(
     output: str | Path,
     *,
     garment: str = "tshirt",
-    method: str = "lbs",
+    method: str | GarmentMethod = "lbs",
     frames: tuple[int, int] | None = None,
     lod: str = "high",
     body_model: str | Path | None = None,
@@ -80,7 +80,8 @@ def dress(
         input_path: USD file with an animated SMPL skeleton (never modified).
         output: the garment layer (``.usdc``/``.usd``/``.usda``).
         garment, lod: the template to load (ignored when ``template`` is given).
-        method: a registered garment method name.
+        method: a registered garment method name, or a method instance (e.g. a configured
+            ``SimulationMethod``).
         frames: ``(a, b)`` dresses frames ``a .. b-1`` only.
         body_model: SMPL-layout body file; None for the embedded default.
         skeleton: Skeleton prim path when the stage has several.
@@ -101,7 +102,7 @@ def dress(
         raise ValueError(f"unknown garment '{garment}' (available: {', '.join(GARMENT_NAMES)})")
     if lod not in LODS:
         raise ValueError(f"unknown level of detail '{lod}' (available: {', '.join(LODS)})")
-    garment_method = get_method(method)
+    garment_method = get_method(method) if isinstance(method, str) else method
     seconds: dict[str, float] = {}
 
     start = time.perf_counter()

@@ -2,8 +2,10 @@
 
 from usd_garment.methods.base import GarmentMethod, available_methods, get_method, register_method
 from usd_garment.methods.lbs import LbsMethod, LbsPushOutMethod
+from usd_garment.methods.simulation import SimulationMethod
 
 register_method(LbsMethod.name, LbsMethod)
 register_method(LbsPushOutMethod.name, LbsPushOutMethod)
+register_method(SimulationMethod.name, SimulationMethod)
 
 __all__ = ["GarmentMethod", "available_methods", "get_method", "register_method"]

@@ -350,14 +350,16 @@ def simulate_sequence(
     limits: CheckLimits | None = None,
     max_substeps: int = 16,
     progress: Callable[[int, int], None] | None = None,
+    initial_vertices: np.ndarray | None = None,
 ) -> SimResult:
     """Simulate a garment through a body motion, checking every frame.
 
-    The garment starts in its rest shape on ``body_rest`` (the body it was modelled on). The
-    body then eases into ``body_frames[0]`` over the lead-in, holds it for ``settle_frames``
-    so the cloth settles, and plays the motion. A frame that fails its checks (see
-    ``CheckLimits``) is simulated again from the state before it with twice the substeps, up
-    to ``max_substeps``; if it still fails, the sequence stops there with status "failed".
+    The garment starts in its rest shape (or at ``initial_vertices``) on ``body_rest`` (the
+    body it was modelled on). The body then eases into ``body_frames[0]`` over the lead-in,
+    holds it for ``settle_frames`` so the cloth settles, and plays the motion. A frame that fails
+    its checks (see ``CheckLimits``) is simulated again from the state before it with twice the
+    substeps, up to ``max_substeps``; if it still fails, the sequence stops there with status
+    "failed".
 
     Args:
         rest_vertices: ``(N, 3)`` garment rest shape (m), worn by ``body_rest``.
@@ -377,6 +379,8 @@ def simulate_sequence(
         limits: what makes a frame bad; ``CheckLimits()`` by default.
         max_substeps: most substeps a retried frame may use.
         progress: called as ``progress(done, total)`` after each simulated frame.
+        initial_vertices: ``(N, 3)`` garment start positions on ``body_rest`` (e.g. the draped
+            template); ``rest_vertices`` by default.
 
     Returns:
         The ``SimResult``; check ``ok`` before using ``points``.
@@ -398,6 +402,7 @@ def simulate_sequence(
     sim = GarmentSimulator(
         rest_vertices, faces, body_faces, start_body, material,
         substeps=substeps, iterations=iterations, fps=fps, contact=contact,
+        initial_vertices=initial_vertices,
     )  # fmt: skip
     edges = unique_edges(np.asarray(faces))
     rest = np.asarray(rest_vertices, dtype=np.float64)

@@ -1,0 +1,121 @@
+"""``usd-garment simulate`` and ``garment drape``: a simulated garment layer with GarmentAPI method
+"simulation" and its solver settings, nothing written when the simulation fails, and draped
+templates that keep their rest lengths and stay outside the rest body."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from pxr import Usd
+
+from usd_garment.body.io import load_body_model
+from usd_garment.cli.main import main
+from usd_garment.eval.body_distance import BodySurface, signed_distance
+from usd_garment.garment.library import find_draped, load_template
+from usd_garment.garment.template import GARMENT_NAMES, LODS
+from usd_garment.motion.sequence import SmplMotion
+from usd_garment.sim.checks import unique_edges
+from usd_garment.sim.drape import rest_body
+from usd_garment.usd.body_layer import write_body_layer
+from usd_garment.usd.garment_read import garment_meshes, read_garment_layer
+from usd_garment.usd.schema import read_garment
+
+pytest.importorskip("newton")
+
+
+def _arms_down(frames: int, jump_at: int | None = None) -> SmplMotion:
+    """Both arms lowered from the T-pose by up to 0.3 rad; with ``jump_at`` the body is
+    teleported 2 m sideways from that frame on (no garment can follow)."""
+    w = np.linspace(0.0, 0.3, frames, dtype=np.float32)
+    pose = np.zeros((frames, 24, 3), dtype=np.float32)
+    pose[:, 16, 2], pose[:, 17, 2] = -w, w
+    trans = np.zeros((frames, 3), dtype=np.float32)
+    if jump_at is not None:
+        trans[jump_at:, 0] = 2.0
+    return SmplMotion(np.zeros(10, np.float32), pose, trans, 30.0)
+
+
+def _run(args: list[object]) -> tuple[int, str]:
+    result = CliRunner().invoke(main, [str(a) for a in args])
+    assert not isinstance(result.exception, AssertionError)
+    return result.exit_code, result.output
+
+
+def test_simulate_writes_a_simulation_layer(tmp_path: Path) -> None:
+    body_path, out = tmp_path / "body.usdc", tmp_path / "sim.usdc"
+    write_body_layer(body_path, _arms_down(4), load_body_model(None))
+    code, output = _run(["simulate", body_path, "-o", out, "--lod", "low", "--json"])
+    assert code == 0, output
+    summary = json.loads(output[output.index("{") :])
+    assert summary["method"] == "simulation" and summary["frames"] == 4
+    points, faces, info = read_garment_layer(out)
+    template = load_template("tshirt", "low")
+    assert points.shape == (4, len(template.vertices), 3) and np.isfinite(points).all()
+    assert np.array_equal(faces, template.faces) and info.method == "simulation"
+    stage = Usd.Stage.Open(str(out))
+    prim = garment_meshes(stage)[0]
+    assert "GarmentAPI" in prim.GetAppliedSchemas()
+    values = read_garment(prim)
+    assert values["method"] == "simulation"
+    settings = json.loads(values["solverSettings"])
+    assert (settings["substeps"], settings["iterations"]) == (4, 4)
+    assert settings["status"] == "ok" and settings["newton"] and settings["retries"] == {}
+    assert settings["material"]["area_density"] == pytest.approx(0.20022)
+    assert settings["max_distance_m"] < 0.15 and settings["penetrating_share_max"] <= 0.002
+
+
+def test_failed_simulation_writes_nothing(tmp_path: Path) -> None:
+    folder = tmp_path / "in"
+    folder.mkdir()
+    body_path = folder / "body.usdc"
+    write_body_layer(body_path, _arms_down(4, jump_at=2), load_body_model(None))
+    out = tmp_path / "out" / "sim.usdc"
+    out.parent.mkdir()
+    code, output = _run(["simulate", body_path, "-o", out, "--lod", "low"])
+    assert code != 0
+    error = [line for line in output.splitlines() if line.startswith("Error")]
+    assert len(error) == 1 and "simulation failed at motion frame 2" in error[0], output
+    assert "Traceback" not in output
+    assert list(out.parent.iterdir()) == [] and list(folder.iterdir()) == [body_path]
+
+
+def test_simulate_bad_material_is_one_line(tmp_path: Path) -> None:
+    material = tmp_path / "silk.json"
+    material.write_text('{"lame_mu": -1}')
+    code, output = _run(["simulate", tmp_path / "b.usdc", "-o", tmp_path / "o.usdc",
+                         "--material", material])  # fmt: skip
+    assert code != 0 and "lame_mu" in output and "Traceback" not in output
+
+
+def test_drape_keeps_rest_lengths_and_stays_outside(tmp_path: Path) -> None:
+    code, output = _run(["garment", "drape", "tshirt", "--lod", "low", "-o", tmp_path, "--json"])
+    assert code == 0, output
+    report = json.loads(output[output.index("[") :])[0]
+    assert report["settled"] and report["rest_length_error_median"] < 0.05
+    assert report["inside_count"] == 0 and report["clearance_min_m"] > 0.0
+    assert (tmp_path / "tshirt_low_draped.npz").is_file()
+
+
+@pytest.mark.parametrize("name", GARMENT_NAMES)
+@pytest.mark.parametrize("lod", list(LODS))
+def test_committed_draped_templates(name: str, lod: str) -> None:
+    body = load_body_model(None)
+    template = load_template(name, lod)
+    draped = load_template(name, lod, draped=True)
+    assert find_draped(template, body) is not None
+    assert np.array_equal(draped.faces, template.faces)
+    edges = unique_edges(template.faces)
+
+    def lengths(v: np.ndarray) -> np.ndarray:
+        return np.linalg.norm(v[edges[:, 0]] - v[edges[:, 1]], axis=1)
+
+    error = np.abs(lengths(draped.vertices) / lengths(template.vertices) - 1.0)
+    assert np.median(error) < 0.05
+    surface = BodySurface(body.faces.numpy(), body.num_vertices)
+    sdf = signed_distance(draped.vertices[None], rest_body(body)[None], surface).distance
+    assert (sdf >= 0).all()
+    assert not np.allclose(draped.vertices, template.vertices)  # it did settle

@@ -1,0 +1,350 @@
+"""Training data: a garment simulated on seeded procedural motions × random body shapes, one SMPL
+body layer and one simulated garment layer per (motion, shape) pair, listed in a JSON manifest.
+
+Motions rotate through ``MOTION_KINDS`` in a seeded order, each with its own seed; shape 0 is the
+mean body (β = 0), the others come from ``random_betas``. The split into train / validation /
+test is by motion, so test motions are never seen in training. Sequences run one per worker
+process (Warp runs CPU kernels on one thread); the manifest is rewritten after each one, so an
+interrupted run resumes where it stopped. A sequence that fails its simulation checks is marked
+"bad" and its files are removed.
+"""
+
+from __future__ import annotations
+
+import json
+import multiprocessing
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from usd_garment.atomic import atomic_output
+from usd_garment.body.io import load_body_model
+from usd_garment.body.joints import NUM_BETAS
+from usd_garment.dress import dress
+from usd_garment.garment.library import load_template
+from usd_garment.garment.template import GARMENT_NAMES, LODS
+from usd_garment.methods.simulation import SimulationError, SimulationMethod
+from usd_garment.motion.procedural import MOTION_KINDS, make_motion, random_betas
+from usd_garment.sim.material import ClothMaterial
+from usd_garment.usd.body_layer import write_body_layer
+from usd_garment.usd.errors import UsdInputError
+from usd_garment.usd.garment_read import read_garment_layer
+
+MANIFEST_NAME = "manifest.json"
+MANIFEST_FORMAT = 1
+#: Shares of the motions in the validation and test splits (the rest is train).
+VALIDATION_SHARE = TEST_SHARE = 0.15
+#: Called after each sequence with its manifest entry, sequences done and sequences to do.
+SequenceProgress = Callable[[dict[str, Any], int, int], None]
+
+
+@dataclass(frozen=True)
+class DatasetConfig:
+    """What a dataset is made of; equal configs make equal datasets.
+
+    Attributes:
+        garment: garment name; lod: its level of detail.
+        motions: number of motions N; shapes: number of body shapes M (N × M sequences).
+        frames: frames per sequence at ``fps``.
+        seed: seed of the motion kinds and seeds, the shapes and the split.
+        substeps, iterations: solver steps per frame and iterations per step.
+        material: the fabric.
+        shape_sigma: ``random_betas``'s clip (±σ). With σ = 2, heavy bodies (β2 ≈ 2) with
+            hanging arms pinch the garment between arm and torso and fail the inside check.
+    """
+
+    garment: str = "tshirt"
+    lod: str = "high"
+    motions: int = 12
+    shapes: int = 3
+    frames: int = 90
+    fps: float = 30.0
+    seed: int = 0
+    substeps: int = 4
+    iterations: int = 4
+    material: ClothMaterial = field(default_factory=ClothMaterial)
+    shape_sigma: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.garment not in GARMENT_NAMES:
+            raise ValueError(f"unknown garment '{self.garment}' ({', '.join(GARMENT_NAMES)})")
+        if self.lod not in LODS:
+            raise ValueError(f"unknown level of detail '{self.lod}' ({', '.join(LODS)})")
+        if self.motions < 1 or self.shapes < 1 or self.frames < 1 or not self.fps > 0:
+            raise ValueError("motions, shapes and frames must be >= 1 and fps > 0")
+        if not self.shape_sigma > 0:
+            raise ValueError("shape_sigma must be > 0")
+
+    def to_json(self) -> dict[str, Any]:
+        values = asdict(self)
+        values["material"] = self.material.to_dict()
+        return values
+
+    def method(self) -> SimulationMethod:
+        """The configured simulation method."""
+        return SimulationMethod(self.substeps, self.iterations, self.material)
+
+
+@dataclass(frozen=True)
+class SequenceSpec:
+    """One (motion, shape) pair of a dataset.
+
+    Attributes:
+        name: e.g. ``m03_s1``; the files are ``{name}_body.usdc`` and ``{name}_{garment}.usdc``.
+        motion_index, motion_kind, motion_seed: the motion and its ``make_motion`` arguments.
+        shape_index, betas: the body shape (``(10,)`` list).
+        split: "train", "validation" or "test" (by motion).
+    """
+
+    name: str
+    motion_index: int
+    motion_kind: str
+    motion_seed: int
+    shape_index: int
+    betas: list[float]
+    split: str
+
+
+def body_file(spec: SequenceSpec) -> str:
+    return f"{spec.name}_body.usdc"
+
+
+def garment_file(spec: SequenceSpec, garment: str) -> str:
+    return f"{spec.name}_{garment}.usdc"
+
+
+def motion_splits(motions: int, seed: int) -> list[str]:
+    """Split of each motion index: a seeded shuffle, then test, validation, train (at least one
+    test and one validation motion from 3 motions on)."""
+    order = np.random.default_rng([seed, 2]).permutation(motions)
+    n_test = max(1, round(TEST_SHARE * motions)) if motions >= 3 else 0
+    n_val = max(1, round(VALIDATION_SHARE * motions)) if motions >= 3 else 0
+    splits = [""] * motions
+    for rank, index in enumerate(order.tolist()):
+        splits[index] = (
+            "test" if rank < n_test else "validation" if rank < n_test + n_val else "train"
+        )
+    return splits
+
+
+def plan_sequences(config: DatasetConfig) -> list[SequenceSpec]:
+    """The dataset's sequences, motion-major. Motion i has kind ``order[i mod K]`` of a seeded
+    permutation of the K kinds and its own seed; shape 0 is β = 0. The plan of N motions × M
+    shapes starts with that of fewer motions or shapes made with the same seed."""
+    kinds = list(MOTION_KINDS)
+    order = np.random.default_rng([config.seed, 0]).permutation(len(kinds))
+    shapes = [np.zeros(NUM_BETAS, dtype=np.float32)] + [
+        random_betas(np.random.default_rng([config.seed, 1, j]), config.shape_sigma)
+        for j in range(1, config.shapes)
+    ]
+    splits = motion_splits(config.motions, config.seed)
+    specs = []
+    for i in range(config.motions):
+        motion_seed = int(np.random.SeedSequence([config.seed, 3, i]).generate_state(1)[0])
+        for j, betas in enumerate(shapes):
+            specs.append(
+                SequenceSpec(
+                    name=f"m{i:02d}_s{j}",
+                    motion_index=i,
+                    motion_kind=kinds[int(order[i % len(kinds)])],
+                    motion_seed=motion_seed,
+                    shape_index=j,
+                    betas=[round(float(b), 6) for b in betas],
+                    split=splits[i],
+                )
+            )
+    return specs
+
+
+def run_sequence(folder: str, config: DatasetConfig, spec: SequenceSpec) -> dict[str, Any]:
+    """Make one sequence's body layer and simulated garment layer in ``folder``.
+
+    Returns:
+        Its manifest entry; on a failed simulation status "bad" and no files left behind.
+    """
+    started = time.perf_counter()
+    out = Path(folder)
+    body = load_body_model(None)
+    motion = make_motion(
+        spec.motion_kind, config.frames, config.fps, spec.motion_seed,
+        np.asarray(spec.betas, dtype=np.float32), body,
+    )  # fmt: skip
+    body_path, garment_path = out / body_file(spec), out / garment_file(spec, config.garment)
+    write_body_layer(body_path, motion, body)
+    method = config.method()
+    entry: dict[str, Any] = {**asdict(spec), "frames": config.frames}
+    try:
+        dress(body_path, garment_path, garment=config.garment, method=method, lod=config.lod)
+    except SimulationError as exc:
+        body_path.unlink(missing_ok=True)
+        garment_path.unlink(missing_ok=True)
+        entry.update(status="bad", message=str(exc), files={})
+    else:
+        entry.update(
+            status="ok", message="",
+            files={"body": body_path.name, "garment": garment_path.name},
+        )  # fmt: skip
+    summary = method.settings
+    entry["checks"] = {
+        key: summary.get(key)
+        for key in (
+            "seconds_per_frame", "retries", "nan_frames", "inside_share_mean", "inside_share_max",
+            "penetrating_share_max", "max_distance_m", "stretch_p99_max",
+        )
+    }  # fmt: skip
+    entry["seconds"] = time.perf_counter() - started
+    return entry
+
+
+def _fixed(config: dict[str, Any]) -> dict[str, Any]:
+    """A config without the motion and shape counts: the plan of more motions or shapes starts
+    with that of fewer, so a dataset can be resumed with more."""
+    return {k: v for k, v in config.items() if k not in ("motions", "shapes")}
+
+
+def _run_task(task: tuple[str, DatasetConfig, SequenceSpec]) -> dict[str, Any]:
+    return run_sequence(*task)
+
+
+def sequence_is_done(folder: Path, config: DatasetConfig, entry: dict[str, Any] | None) -> bool:
+    """Whether a manifest entry is finished: "bad", or "ok" with both files present and a
+    garment layer of the expected frames and vertices."""
+    if entry is None or entry.get("status") not in ("ok", "bad"):
+        return False
+    if entry["status"] == "bad":
+        return True
+    files = entry.get("files", {})
+    paths = [folder / files.get("body", ""), folder / files.get("garment", "")]
+    if not all(p.is_file() for p in paths):
+        return False
+    try:
+        points = read_garment_layer(paths[1])[0]
+    except UsdInputError:
+        return False
+    vertices = len(load_template(config.garment, config.lod).vertices)
+    return points.shape[:2] == (config.frames, vertices)
+
+
+def read_manifest(folder: str | Path) -> dict[str, Any]:
+    """The manifest of the dataset in ``folder``.
+
+    Raises:
+        FileNotFoundError: no manifest; ValueError: not a manifest.
+    """
+    path = Path(folder) / MANIFEST_NAME
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no dataset manifest")
+    try:
+        manifest = json.loads(path.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{path}: not a JSON manifest ({exc.msg})") from exc
+    if not isinstance(manifest, dict) or manifest.get("format") != MANIFEST_FORMAT:
+        raise ValueError(f"{path}: not a dataset manifest of format {MANIFEST_FORMAT}")
+    return manifest
+
+
+def _write_manifest(folder: Path, manifest: dict[str, Any]) -> None:
+    ok = [s for s in manifest["sequences"] if s["status"] == "ok"]
+    manifest["summary"] = {
+        "sequences": len(manifest["sequences"]),
+        "ok": len(ok),
+        "bad": sum(s["status"] == "bad" for s in manifest["sequences"]),
+        "frames_ok": sum(s["frames"] for s in ok),
+        "bytes": sum((folder / f).stat().st_size for s in ok for f in s["files"].values()),
+    }
+    with atomic_output(folder / MANIFEST_NAME) as tmp:
+        tmp.write_text(json.dumps(manifest, indent=1) + "\n", encoding="utf-8")
+
+
+def make_dataset(
+    folder: str | Path,
+    config: DatasetConfig,
+    *,
+    workers: int = 1,
+    resume: bool = False,
+    on_sequence: SequenceProgress | None = None,
+) -> dict[str, Any]:
+    """Make (or, with ``resume``, finish) the dataset ``config`` in ``folder``.
+
+    Args:
+        folder: output folder (created; its parent must exist).
+        config: what to make.
+        workers: processes simulating one sequence each at a time (spawned); 1 runs in this
+            process.
+        resume: keep the finished sequences of an existing manifest with the same config (the
+            motion and shape counts may grow; splits are reassigned).
+        on_sequence: called after each sequence made (see ``SequenceProgress``).
+
+    Returns:
+        The manifest (also written to ``folder/manifest.json``).
+
+    Raises:
+        ValueError: a manifest already there without ``resume``, or made with another config.
+        FileNotFoundError: the parent folder does not exist.
+    """
+    folder = Path(folder)
+    if workers < 1:
+        raise ValueError("workers must be >= 1")
+    if not folder.parent.is_dir():
+        raise FileNotFoundError(f"{folder.parent}: folder does not exist")
+    specs = plan_sequences(config)
+    previous: dict[str, dict[str, Any]] = {}
+    if (folder / MANIFEST_NAME).is_file():
+        if not resume:
+            raise ValueError(f"{folder} already holds a dataset: pass --resume or another folder")
+        old = read_manifest(folder)
+        if _fixed(old.get("config", {})) != _fixed(config.to_json()):
+            raise ValueError(f"{folder}: the dataset there was made with other settings")
+        previous = {s["name"]: s for s in old["sequences"]}
+    folder.mkdir(exist_ok=True)
+    method = config.method()
+    solver = {k: v for k, v in method.settings.items() if k != "material"}
+    entries = {}
+    for spec in specs:
+        entry = previous.get(spec.name)
+        same = entry is not None and all(
+            entry.get(k) == v for k, v in asdict(spec).items() if k != "split"
+        )
+        if not same or not sequence_is_done(folder, config, entry):
+            entry = {**asdict(spec), "status": "pending"}
+        entries[spec.name] = {**entry, "split": spec.split}
+    manifest: dict[str, Any] = {
+        "format": MANIFEST_FORMAT,
+        "config": config.to_json(),
+        "garment": config.garment,
+        "lod": config.lod,
+        "vertices": len(load_template(config.garment, config.lod).vertices),
+        "body_model": load_body_model(None).name,
+        "seed": config.seed,
+        "material": config.material.to_dict(),
+        "solver": solver,
+        "splits": {
+            split: sorted({s.motion_index for s in specs if s.split == split})
+            for split in ("train", "validation", "test")
+        },
+        "sequences": list(entries.values()),
+    }
+    todo = [s for s in specs if entries[s.name]["status"] == "pending"]
+    _write_manifest(folder, manifest)
+    tasks = [(str(folder), config, spec) for spec in todo]
+
+    def record(entry: dict[str, Any], done: int) -> None:
+        entries[entry["name"]] = entry
+        manifest["sequences"] = list(entries.values())
+        _write_manifest(folder, manifest)
+        if on_sequence is not None:
+            on_sequence(entry, done, len(todo))
+
+    if workers == 1 or len(tasks) <= 1:
+        for done, task in enumerate(tasks, start=1):
+            record(_run_task(task), done)
+    else:
+        context = multiprocessing.get_context("spawn")
+        with context.Pool(min(workers, len(tasks))) as pool:
+            for done, entry in enumerate(pool.imap_unordered(_run_task, tasks), start=1):
+                record(entry, done)
+    return manifest
