@@ -9,7 +9,10 @@ the cloth simulator starts from the garment on the rest body. The root translati
 body: the lowest point of the feet stays on the floor (the rest sole height; within about a
 centimetre, as that height is smoothed over :data:`LIFT_SMOOTHING`) except during jumps; walk
 and run move forward along the heading (+Z, turning slowly) at the average speed at which the
-stance foot moves backwards; in place, the feet stay where they are on average.
+stance foot moves backwards; in place, the feet stay where they are on average. The arms
+keep :data:`ARM_CLEARANCE` from the torso whatever the body shape: where the skinned body's
+arm comes closer, the shoulders open sideways (smoothly over time) until it does, as a
+garment needs room between arm and torso and real arms rarely press into the trunk.
 """
 
 from __future__ import annotations
@@ -19,7 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
-from scipy.ndimage import gaussian_filter1d
+from scipy.ndimage import gaussian_filter1d, maximum_filter1d
+from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from usd_garment.body.io import load_body_model
@@ -40,6 +44,22 @@ LIFT_SMOOTHING = 0.03
 #: of the feet, heels included) that touch the floor.
 SOLE_BAND = 0.05
 
+#: Smallest distance (m) kept between an arm and the torso surface of the skinned body.
+ARM_CLEARANCE = 0.02
+
+#: Arm vertices closer than this (m) to the torso in the rest pose (the armpit, the top of the
+#: shoulder) are not held to :data:`ARM_CLEARANCE`: they join the torso.
+ARM_ROOT = 0.10
+
+#: Sideways shoulder opening (rad) added per clearance step, and the most steps.
+ARM_STEP = 0.05
+ARM_STEPS = 16
+
+#: Time scale (s) over which the shoulder opening is spread and smoothed.
+ARM_SMOOTHING = 0.2
+
+_TORSO_JOINTS = ("pelvis", "spine1", "spine2", "spine3")
+_ARM_JOINTS = ("shoulder", "elbow", "wrist", "hand")
 _J = {name: i for i, name in enumerate(SMPL_JOINT_NAMES)}
 _TWO_PI = 2.0 * np.pi
 
@@ -363,6 +383,7 @@ def make_motion(
     weight = blend_in(t)
     plan = _GENERATORS[kind](t, np.random.default_rng(seed))
     euler = plan.euler * weight[:, None, None]
+    euler = _open_arms(body, shape, euler, weight, fps)
     heading = np.concatenate([[0.0], np.cumsum(plan.yaw_rate * weight[1:]) / fps])
     pose = clamp_to_limits(euler_to_pose(euler))
     root = Rotation.from_rotvec(heading[:, None] * [0.0, 1.0, 0.0]) * Rotation.from_rotvec(
@@ -394,6 +415,56 @@ def make_motion(
         fps=float(fps),
         model=body.name,
     )
+
+
+def arm_clearance(body: BodyModel, betas: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    """Distance (m) from each arm to the torso, per frame: ``(T, 2)`` (left, right) for
+    ``pose`` ``(T, 24, 3)`` axis-angle on ``body`` at ``betas`` ``(10,)``.
+
+    Arm vertices are those skinned mostly to a shoulder, elbow, wrist or hand joint and at
+    least :data:`ARM_ROOT` from the torso in the rest pose; torso vertices those skinned mostly
+    to the pelvis or the spine. Pose blendshapes included; the root translation does not matter.
+    """
+    dominant = body.weights.argmax(dim=1).numpy()
+    torso = np.isin(dominant, [_J[name] for name in _TORSO_JOINTS])
+    with torch.no_grad():
+        out = body(torch.as_tensor(betas, dtype=torch.float32), torch.as_tensor(pose).float())
+    rest = out.rest_vertices.reshape(-1, body.num_vertices, 3)[0].numpy()
+    posed = out.vertices.numpy()
+    arms = []
+    for side in ("left", "right"):
+        arm = np.isin(dominant, [_J[f"{side}_{part}"] for part in _ARM_JOINTS])
+        arm[arm] = cKDTree(rest[torso]).query(rest[arm])[0] >= ARM_ROOT
+        arms.append(arm)
+    gaps = np.empty((len(pose), 2))
+    for f in range(len(pose)):
+        tree = cKDTree(posed[f, torso])
+        gaps[f] = [tree.query(posed[f, arm])[0].min() for arm in arms]
+    return gaps
+
+
+def _open_arms(
+    body: BodyModel, betas: np.ndarray, euler: np.ndarray, weight: np.ndarray, fps: float
+) -> np.ndarray:
+    """``euler`` ``(T, 24, 3)`` with the shoulders opened sideways wherever an arm is closer
+    than :data:`ARM_CLEARANCE` to the torso: the opening of each side grows by
+    :data:`ARM_STEP` rad at the frames still too close, spread over neighbouring frames (a
+    running maximum and a Gaussian over :data:`ARM_SMOOTHING`) and faded in with the blend-in
+    ``weight`` ``(T,)``, for at most :data:`ARM_STEPS` steps."""
+    need = np.zeros((len(euler), 2))
+    opened = euler
+    width = max(round(ARM_SMOOTHING * fps), 1)
+    for _ in range(ARM_STEPS):
+        short = arm_clearance(body, betas, clamp_to_limits(euler_to_pose(opened))) < ARM_CLEARANCE
+        if not short.any():
+            break
+        need += ARM_STEP * short
+        spread = gaussian_filter1d(maximum_filter1d(need, 2 * width + 1, axis=0), width / 2, axis=0)
+        lift = spread * weight[:, None]
+        opened = euler.copy()
+        opened[:, _J["left_shoulder"], 2] += lift[:, 0]  # left arm up: +z, the right mirrored
+        opened[:, _J["right_shoulder"], 2] -= lift[:, 1]
+    return opened
 
 
 def _sole_points(body: BodyModel, betas: np.ndarray, pose: np.ndarray) -> np.ndarray:
