@@ -13,6 +13,7 @@ from tqdm import tqdm
 from usd_garment.cli.errors import user_errors
 from usd_garment.dataset import MANIFEST_NAME, DatasetConfig, make_dataset
 from usd_garment.garment.template import GARMENT_NAMES, LODS
+from usd_garment.sim.cloth import ITERATIONS, SUBSTEPS
 from usd_garment.sim.material import ClothMaterial
 
 
@@ -35,8 +36,8 @@ def dataset() -> None:
     show_default=True,
     help="Body shapes: betas standard normal, clipped to ±sigma.",
 )
-@click.option("--substeps", type=click.IntRange(1, 64), default=4, show_default=True)
-@click.option("--iterations", type=click.IntRange(1, 64), default=4, show_default=True)
+@click.option("--substeps", type=click.IntRange(1, 64), default=SUBSTEPS, show_default=True)
+@click.option("--iterations", type=click.IntRange(1, 64), default=ITERATIONS, show_default=True)
 @click.option(
     "--material",
     type=click.Path(dir_okay=False, path_type=Path),

@@ -14,6 +14,7 @@ from usd_garment.cli.options import parse_frames
 from usd_garment.dress import dress as dress_stage
 from usd_garment.garment.template import GARMENT_NAMES, LODS
 from usd_garment.methods.simulation import SimulationMethod
+from usd_garment.sim.cloth import ITERATIONS, SUBSTEPS
 from usd_garment.sim.material import ClothMaterial
 
 
@@ -28,8 +29,8 @@ from usd_garment.sim.material import ClothMaterial
 )
 @click.option("--garment", type=click.Choice(GARMENT_NAMES), default="tshirt", show_default=True)
 @click.option("--lod", type=click.Choice(tuple(LODS)), default="high", show_default=True)
-@click.option("--substeps", type=click.IntRange(1, 64), default=4, show_default=True)
-@click.option("--iterations", type=click.IntRange(1, 64), default=4, show_default=True)
+@click.option("--substeps", type=click.IntRange(1, 64), default=SUBSTEPS, show_default=True)
+@click.option("--iterations", type=click.IntRange(1, 64), default=ITERATIONS, show_default=True)
 @click.option(
     "--material",
     type=click.Path(dir_okay=False, path_type=Path),

@@ -19,6 +19,7 @@ from usd_garment.garment.library import find_draped, load_template
 from usd_garment.garment.template import GARMENT_NAMES, LODS
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.sim.checks import unique_edges
+from usd_garment.sim.cloth import ITERATIONS, SUBSTEPS
 from usd_garment.sim.drape import rest_body
 from usd_garment.usd.body_layer import write_body_layer
 from usd_garment.usd.garment_read import garment_meshes, read_garment_layer
@@ -62,7 +63,7 @@ def test_simulate_writes_a_simulation_layer(tmp_path: Path) -> None:
     values = read_garment(prim)
     assert values["method"] == "simulation"
     settings = json.loads(values["solverSettings"])
-    assert (settings["substeps"], settings["iterations"]) == (4, 4)
+    assert (settings["substeps"], settings["iterations"]) == (SUBSTEPS, ITERATIONS)
     assert settings["status"] == "ok" and settings["newton"] and settings["retries"] == {}
     assert settings["material"]["area_density"] == pytest.approx(0.20022)
     assert settings["max_distance_m"] < 0.15 and settings["penetrating_share_max"] <= 0.002

@@ -29,6 +29,7 @@ from usd_garment.garment.library import load_template
 from usd_garment.garment.template import GARMENT_NAMES, LODS
 from usd_garment.methods.simulation import SimulationError, SimulationMethod
 from usd_garment.motion.procedural import MOTION_KINDS, make_motion, random_betas
+from usd_garment.sim.cloth import ITERATIONS, SUBSTEPS
 from usd_garment.sim.material import ClothMaterial
 from usd_garment.usd.body_layer import write_body_layer
 from usd_garment.usd.errors import UsdInputError
@@ -64,8 +65,8 @@ class DatasetConfig:
     frames: int = 90
     fps: float = 30.0
     seed: int = 0
-    substeps: int = 4
-    iterations: int = 4
+    substeps: int = SUBSTEPS
+    iterations: int = ITERATIONS
     material: ClothMaterial = field(default_factory=ClothMaterial)
     shape_sigma: float = 1.0
 

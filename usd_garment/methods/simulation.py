@@ -20,7 +20,13 @@ from usd_garment.garment.template import GarmentTemplate
 from usd_garment.methods.base import Progress
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.sim.checks import CheckLimits
-from usd_garment.sim.cloth import ContactSettings, SimResult, simulate_sequence
+from usd_garment.sim.cloth import (
+    ITERATIONS,
+    SUBSTEPS,
+    ContactSettings,
+    SimResult,
+    simulate_sequence,
+)
 from usd_garment.sim.drape import drape_template
 from usd_garment.sim.material import ClothMaterial
 
@@ -114,8 +120,8 @@ class SimulationMethod:
 
     def __init__(
         self,
-        substeps: int = 4,
-        iterations: int = 4,
+        substeps: int = SUBSTEPS,
+        iterations: int = ITERATIONS,
         material: ClothMaterial | None = None,
         lead_in: int = LEAD_IN_FRAMES,
         settle: int = SETTLE_FRAMES,

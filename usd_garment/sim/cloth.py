@@ -24,6 +24,10 @@ from usd_garment.sim.material import ClothMaterial
 GRAVITY = 9.81
 #: Margin (m) around the body's broad-phase box.
 AABB_PAD = 0.05
+#: Default solver settings per 30 fps frame: substeps, and projective-dynamics iterations per
+#: substep (4 iterations under-resolve the membrane: edge stretch p99 up to 1.3 in fast motions).
+SUBSTEPS = 4
+ITERATIONS = 10
 
 
 @dataclass(frozen=True)
@@ -40,7 +44,7 @@ class ContactSettings:
         self_radius: half-thickness of cloth-cloth contacts (m); Style3D's default is 3 mm.
     """
 
-    radius: float = 2e-3
+    radius: float = 4e-3
     gap: float = 2e-2
     stiffness: float = 1e3
     damping: float = 1e-4
@@ -107,8 +111,8 @@ class GarmentSimulator:
         body_vertices0: np.ndarray,
         material: ClothMaterial | None = None,
         *,
-        substeps: int = 4,
-        iterations: int = 4,
+        substeps: int = SUBSTEPS,
+        iterations: int = ITERATIONS,
         fps: float = 30.0,
         contact: ContactSettings | None = None,
         initial_vertices: np.ndarray | None = None,
@@ -343,8 +347,8 @@ def simulate_sequence(
     lead_in: np.ndarray | int = 10,
     settle_frames: int = 5,
     material: ClothMaterial | None = None,
-    substeps: int = 4,
-    iterations: int = 4,
+    substeps: int = SUBSTEPS,
+    iterations: int = ITERATIONS,
     fps: float = 30.0,
     contact: ContactSettings | None = None,
     limits: CheckLimits | None = None,

@@ -15,7 +15,7 @@ from usd_garment.body.joints import NUM_BETAS, NUM_JOINTS
 from usd_garment.body.model import BodyModel
 from usd_garment.garment.template import GarmentTemplate
 from usd_garment.sim.checks import unique_edges
-from usd_garment.sim.cloth import GarmentSimulator
+from usd_garment.sim.cloth import ITERATIONS, SUBSTEPS, GarmentSimulator
 from usd_garment.sim.material import ClothMaterial
 
 #: Frames (at 30 fps) simulated at least and at most while draping.
@@ -82,8 +82,8 @@ def drape_template(
     body: BodyModel,
     *,
     material: ClothMaterial | None = None,
-    substeps: int = 4,
-    iterations: int = 4,
+    substeps: int = SUBSTEPS,
+    iterations: int = ITERATIONS,
     min_frames: int = MIN_FRAMES,
     max_frames: int = MAX_FRAMES,
     settled_speed: float = SETTLED_SPEED,
