@@ -11,9 +11,9 @@ import click
 from tqdm import tqdm
 
 from usd_garment.cli.errors import user_errors
+from usd_garment.cli.options import json_option, lod_option, solver_options
 from usd_garment.dataset import MANIFEST_NAME, DatasetConfig, make_dataset
-from usd_garment.garment.template import GARMENT_NAMES, LODS
-from usd_garment.sim.cloth import ITERATIONS, SUBSTEPS
+from usd_garment.garment.template import GARMENT_NAMES
 from usd_garment.sim.material import ClothMaterial
 
 
@@ -27,7 +27,7 @@ def dataset() -> None:
 @click.option("--motions", type=click.IntRange(1), default=12, show_default=True)
 @click.option("--shapes", type=click.IntRange(1), default=3, show_default=True)
 @click.option("--frames", type=click.IntRange(1), default=90, show_default=True)
-@click.option("--lod", type=click.Choice(tuple(LODS)), default="high", show_default=True)
+@lod_option
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option(
     "--shape-sigma",
@@ -36,14 +36,7 @@ def dataset() -> None:
     show_default=True,
     help="Body shapes: betas standard normal, clipped to ±sigma.",
 )
-@click.option("--substeps", type=click.IntRange(1, 64), default=SUBSTEPS, show_default=True)
-@click.option("--iterations", type=click.IntRange(1, 64), default=ITERATIONS, show_default=True)
-@click.option(
-    "--material",
-    type=click.Path(dir_okay=False, path_type=Path),
-    default=None,
-    help="Fabric JSON file (keys of ClothMaterial); default: SNUG cotton.",
-)
+@solver_options
 @click.option(
     "--workers",
     type=click.IntRange(1),
@@ -59,7 +52,7 @@ def dataset() -> None:
     required=True,
     help="Dataset folder (created).",
 )
-@click.option("--json", "as_json", is_flag=True, help="Print the manifest's summary as JSON.")
+@json_option("Print the manifest's summary as JSON.")
 def make(
     garment: str,
     motions: int,

@@ -12,6 +12,7 @@ import numpy as np
 from tqdm import tqdm
 
 from usd_garment.garment.template import LODS
+from usd_garment.sim.cloth import ITERATIONS, SUBSTEPS
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -31,6 +32,20 @@ lod_option = click.option(
 frames_option = click.option(
     "--frames", default=None, help="Frames A:B of the stage's range (B exclusive)."
 )
+
+
+def solver_options(command: F) -> F:
+    """The cloth solver's ``--substeps``, ``--iterations`` and ``--material`` options."""
+    for option in reversed((
+        click.option("--substeps", type=click.IntRange(1, 64), default=SUBSTEPS,
+                     show_default=True, help="Solver substeps per 30 fps frame."),
+        click.option("--iterations", type=click.IntRange(1, 64), default=ITERATIONS,
+                     show_default=True, help="Solver iterations per substep."),
+        click.option("--material", type=click.Path(dir_okay=False, path_type=Path), default=None,
+                     help="Fabric JSON file (keys of ClothMaterial); default: SNUG cotton."),
+    )):  # fmt: skip
+        command = option(command)
+    return command
 
 
 def json_option(help_text: str = "Print a JSON summary on stdout.") -> Callable[[F], F]:

@@ -7,14 +7,21 @@ import json
 from pathlib import Path
 
 import click
-from tqdm import tqdm
 
 from usd_garment.cli.errors import user_errors
-from usd_garment.cli.options import parse_frames
+from usd_garment.cli.options import (
+    FrameProgress,
+    body_model_option,
+    frames_option,
+    json_option,
+    lod_option,
+    parse_frames,
+    skeleton_option,
+    solver_options,
+)
 from usd_garment.dress import dress as dress_stage
-from usd_garment.garment.template import GARMENT_NAMES, LODS
+from usd_garment.garment.template import GARMENT_NAMES
 from usd_garment.methods.simulation import SimulationMethod
-from usd_garment.sim.cloth import ITERATIONS, SUBSTEPS
 from usd_garment.sim.material import ClothMaterial
 
 
@@ -28,24 +35,12 @@ from usd_garment.sim.material import ClothMaterial
     help="Garment layer to write (.usdc, .usd or .usda).",
 )
 @click.option("--garment", type=click.Choice(GARMENT_NAMES), default="tshirt", show_default=True)
-@click.option("--lod", type=click.Choice(tuple(LODS)), default="high", show_default=True)
-@click.option("--substeps", type=click.IntRange(1, 64), default=SUBSTEPS, show_default=True)
-@click.option("--iterations", type=click.IntRange(1, 64), default=ITERATIONS, show_default=True)
-@click.option(
-    "--material",
-    type=click.Path(dir_okay=False, path_type=Path),
-    default=None,
-    help="Fabric JSON file (keys of ClothMaterial); default: SNUG cotton.",
-)
-@click.option("--frames", default=None, help="Frames A:B of the stage's range (B exclusive).")
-@click.option(
-    "--body-model",
-    type=click.Path(dir_okay=False, path_type=Path),
-    default=None,
-    help="SMPL-layout body file (.npz/.pkl); default: the embedded free body.",
-)
-@click.option("--skeleton", default=None, help="Skeleton prim path when the stage has several.")
-@click.option("--json", "as_json", is_flag=True, help="Print a JSON summary on stdout.")
+@lod_option
+@solver_options
+@frames_option
+@body_model_option
+@skeleton_option
+@json_option()
 def simulate(
     input_path: Path,
     output: Path,
@@ -61,35 +56,21 @@ def simulate(
 ) -> None:
     """Simulate a garment on the animated SMPL body of BODY; write the garment layer."""
     frame_range = parse_frames(frames)
-    bar: tqdm | None = None
-
-    def on_read(total: int) -> None:
-        nonlocal bar
-        bar = tqdm(total=total, desc="simulation", unit="frame", leave=False, disable=None)
-
-    def progress(done: int) -> None:
-        if bar is not None:
-            bar.update(done - bar.n)
-
-    try:
-        with user_errors():
-            fabric = ClothMaterial.load(material) if material is not None else None
-            method = SimulationMethod(substeps, iterations, fabric, max_substeps=max(16, substeps))
-            result = dress_stage(
-                input_path,
-                output,
-                garment=garment,
-                method=method,
-                frames=frame_range,
-                lod=lod,
-                body_model=body_model,
-                skeleton=skeleton,
-                on_read=on_read,
-                progress=progress,
-            )
-    finally:
-        if bar is not None:
-            bar.close()
+    with FrameProgress("simulation") as bar, user_errors():
+        fabric = ClothMaterial.load(material) if material is not None else None
+        method = SimulationMethod(substeps, iterations, fabric, max_substeps=max(16, substeps))
+        result = dress_stage(
+            input_path,
+            output,
+            garment=garment,
+            method=method,
+            frames=frame_range,
+            lod=lod,
+            body_model=body_model,
+            skeleton=skeleton,
+            on_read=bar.on_read,
+            progress=bar.progress,
+        )
     settings = method.settings
     if as_json:
         click.echo(json.dumps({**result.to_json(), "simulation": settings}, indent=2))
