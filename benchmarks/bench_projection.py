@@ -1,20 +1,31 @@
 """Benchmark of the projection of simulated garments to canonical space (the paper's Sec. 3.3),
 against the two unposing baselines of its Fig. 5, measured in the same run.
 
-Simulates a few short T-shirt sequences (procedural motions × random body shapes, Newton
-Style3D; cached under scratch/projection/ as .npz, so later runs only project), then for each
-method prints: mean and p99 reprojection error (m_sim vs the method's own forward model, mm),
+Sequences: by default a few short T-shirt sequences simulated here (procedural motions × random
+body shapes, Newton Style3D; cached under scratch/projection/ as .npz, so later runs only
+project); with ``--manifest`` the ok sequences of a simulated dataset (``dataset make``), read from
+its USD layers as ``usd-garment project`` reads them. With ``--canonical`` our projection is not
+run again but read from a training set file written by ``usd-garment project`` over the same
+layers (its throughput then comes from the file's metadata).
+
+For each method it prints: mean and p99 reprojection error (m_sim vs the method's own forward
+model, mm; zero by construction for the two baselines, whose inverse skinning is exact),
 share of canonical vertices inside the canonical body and within 1 mm of it (exact signed
 distance to the β = 0 T-pose body mesh), mean per-vertex acceleration of X in canonical space
-(m/s², 30 fps), and throughput (frames/s on this CPU).
+(m/s², 30 fps: temporal stability), and throughput (frames/s on this CPU). The totals pool all
+vertices of all frames.
 
     python benchmarks/bench_projection.py [--lod high] [--frames 60] [--iterations 40]
+    python benchmarks/bench_projection.py --manifest scratch/dataset_tshirt/manifest.json \
+        --split validation,test [--max-sequences K] [--canonical set.npz]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +33,8 @@ import torch
 
 from usd_garment.body.io import load_body_model
 from usd_garment.body.model import BodyModel
+from usd_garment.canonical.dataset import CanonicalSet, load_canonical_set
+from usd_garment.canonical.project_layers import match_frames
 from usd_garment.canonical.projection import ProjectionSettings, project_sequence
 from usd_garment.canonical.unpose import (
     skin_body_vertices,
@@ -35,12 +48,17 @@ from usd_garment.garment.model import GarmentModel
 from usd_garment.motion.procedural import make_motion, random_betas
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.sim.cloth import simulate_sequence
+from usd_garment.usd.garment_read import read_garment_layer
+from usd_garment.usd.read import read_smpl_motion
 
 FPS = 30.0
 CACHE = Path(__file__).resolve().parents[1] / "scratch" / "projection"
 #: (motion kind, motion seed, shape seed; None: the mean shape).
 SEQUENCES = (("arm_raise", 1, None), ("torso_twist", 2, 11), ("walk", 3, 12), ("arm_swing", 4, 13))
 LEAD_IN = 10
+METHODS = ("ours", "constant weights", "per-frame nearest vertex")
+#: One sequence to measure: (label, motion at the garment's frames, points (T, N, 3), source).
+Sequence = tuple[str, SmplMotion, np.ndarray, Path | None]
 
 
 def simulate(
@@ -89,20 +107,95 @@ def simulate(
     return motion, result.points
 
 
-def measures(
-    canonical: np.ndarray, error: np.ndarray, body: BodyModel, surface: BodySurface
+def simulated_sequences(body: BodyModel, lod: str, frames: int, count: int) -> Iterator[Sequence]:
+    """The benchmark's own cached or newly simulated sequences (failed ones skipped)."""
+    for kind, seed, shape_seed in SEQUENCES[:count]:
+        started = time.perf_counter()
+        motion, points = simulate(body, lod, kind, seed, shape_seed, frames)
+        if motion is not None and points is not None:
+            label = f"{kind} (shape seed {shape_seed})"
+            print(f"{label}: {len(points)} frames, ready in {time.perf_counter() - started:.1f} s")
+            yield label, motion, points, None
+
+
+def dataset_sequences(
+    manifest: Path, splits: list[str], max_sequences: int | None, body: BodyModel, n: int
+) -> Iterator[Sequence]:
+    """The ok sequences of a simulated dataset in ``splits``, read from their USD layers."""
+    info = json.loads(manifest.read_text())
+    chosen = [q for q in info["sequences"] if q["status"] == "ok" and q["split"] in splits]
+    chosen.sort(key=lambda q: (splits.index(q["split"]), q["name"]))
+    chosen = chosen[:max_sequences]
+    print(f"{manifest}: {len(chosen)} ok sequences of {'+'.join(splits)}, "
+          f"{sum(q['frames'] for q in chosen)} frames")  # fmt: skip
+    for q in chosen:
+        garment = manifest.parent / q["files"]["garment"]
+        points, _, layer = read_garment_layer(garment)
+        if points.shape[1] != n:
+            raise SystemExit(f"{garment}: {points.shape[1]} vertices, the template has {n}")
+        motion, _ = read_smpl_motion(manifest.parent / q["files"]["body"], body)
+        label = f"{q['name']} ({q['split']}, {q['motion_kind']})"
+        yield label, match_frames(points, layer.time_codes, motion), points, garment
+
+
+class Totals:
+    """Figures of one method pooled over all vertices of all frames."""
+
+    def __init__(self) -> None:
+        self.vertices = 0
+        self.inside = 0
+        self.within_1mm = 0
+        self.acc_sum = 0.0
+        self.acc_count = 0
+        self.errors: list[np.ndarray] = []
+        self.seconds = 0.0
+
+    def add(self, canonical: np.ndarray, error: np.ndarray, sdf: np.ndarray) -> dict[str, float]:
+        """Add one sequence; its own figures."""
+        acc = np.linalg.norm(canonical[2:] - 2 * canonical[1:-1] + canonical[:-2], axis=-1)
+        acc *= FPS**2
+        self.vertices += sdf.size
+        self.inside += int((sdf < 0).sum())
+        self.within_1mm += int((sdf < 1e-3).sum())
+        self.acc_sum += float(acc.sum())
+        self.acc_count += acc.size
+        self.errors.append(error.astype(np.float32).ravel())
+        return figures(sdf.size, int((sdf < 0).sum()), int((sdf < 1e-3).sum()),
+                       float(acc.mean()), error.ravel())  # fmt: skip
+
+    def pooled(self) -> dict[str, float]:
+        acc = self.acc_sum / max(self.acc_count, 1)
+        return figures(
+            self.vertices, self.inside, self.within_1mm, acc, np.concatenate(self.errors)
+        )
+
+
+def figures(
+    vertices: int, inside: int, within: int, acc: float, error: np.ndarray
 ) -> dict[str, float]:
-    """Collision shares in the canonical body, acceleration and error figures of one method."""
-    rest = np.repeat(body.v_template.numpy()[None], len(canonical), axis=0)
-    sdf = signed_distance(canonical, rest, surface).distance
-    acc = np.linalg.norm(canonical[2:] - 2 * canonical[1:-1] + canonical[:-2], axis=-1) * FPS**2
+    """Collision shares, acceleration and reprojection error figures of one method."""
     return {
-        "inside": float((sdf < 0).mean()),
-        "within_1mm": float((sdf < 1e-3).mean()),
-        "acc": float(acc.mean()),
+        "inside": inside / vertices,
+        "within_1mm": within / vertices,
+        "acc": acc,
         "err_mean": float(error.mean()),
         "err_p99": float(np.percentile(error, 99)),
+        "err_max": float(error.max()),
     }
+
+
+def line(name: str, m: dict[str, float]) -> str:
+    return (f"  {name:26s} err mean {1e3 * m['err_mean']:6.3f} mm p99 {1e3 * m['err_p99']:6.3f} "
+            f"mm max {1e3 * m['err_max']:7.3f} mm | inside {100 * m['inside']:7.4f}% "
+            f"<1 mm {100 * m['within_1mm']:7.3f}% | acc {m['acc']:6.3f} m/s²")  # fmt: skip
+
+
+def stored_projection(data: CanonicalSet, source: Path) -> np.ndarray:
+    """The canonical X ``(T, N, 3)`` of ``source``'s sequence in a training set file."""
+    sources = [Path(p).resolve() for p in data.sources]
+    if source.resolve() not in sources:
+        raise SystemExit(f"{source}: not in the canonical set file")
+    return data.canonical[data.sequence(sources.index(source.resolve()))]
 
 
 def main() -> None:
@@ -114,6 +207,15 @@ def main() -> None:
     parser.add_argument("--sequences", type=int, default=len(SEQUENCES))
     parser.add_argument("--fields", default=None, help="body fields file (default: embedded)")
     parser.add_argument("--threads", type=int, default=1, help="torch CPU threads")
+    parser.add_argument("--manifest", type=Path, default=None, help="simulated dataset manifest")
+    parser.add_argument(
+        "--split", default="test", help="with --manifest: comma-separated splits, or 'all'"
+    )
+    parser.add_argument("--max-sequences", type=int, default=None, help="with --manifest")
+    parser.add_argument(
+        "--canonical", type=Path, default=None,
+        help="with --manifest: read our projection from this 'usd-garment project' output",
+    )  # fmt: skip
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
 
@@ -123,27 +225,36 @@ def main() -> None:
     model = GarmentModel(body, load_body_fields(args.fields))
     surface = BodySurface(body.faces.numpy(), body.num_vertices)
     settings = ProjectionSettings(iterations=args.iterations, chunk=args.chunk)
-    print(f"T-shirt {args.lod}: {len(template.vertices)} vertices; {settings}")
-    totals: dict[str, list[dict[str, float]]] = {}
-    seconds: dict[str, float] = {}
+    stored = None if args.canonical is None else load_canonical_set(args.canonical)
+    print(f"T-shirt {args.lod}: {len(template.vertices)} vertices; {settings}; "
+          f"torch threads {torch.get_num_threads()}")  # fmt: skip
+    if stored is not None:
+        print(f"ours: read from {args.canonical} ({stored.metadata['projection']})")
+    if args.manifest is None:
+        sequences = simulated_sequences(body, args.lod, args.frames, args.sequences)
+    else:
+        splits = ["train", "validation", "test"] if args.split == "all" else args.split.split(",")
+        sequences = dataset_sequences(
+            args.manifest, splits, args.max_sequences, body, len(template.vertices)
+        )
+    totals = {name: Totals() for name in METHODS}
+    rest_body = body.v_template.numpy()
     frames_total = 0
-    for kind, seed, shape_seed in SEQUENCES[: args.sequences]:
-        started = time.perf_counter()
-        motion, points = simulate(body, args.lod, kind, seed, shape_seed, args.frames)
-        if motion is None or points is None:
-            continue
-        print(f"{kind} (shape seed {shape_seed}): {len(points)} frames, "
-              f"ready in {time.perf_counter() - started:.1f} s")  # fmt: skip
+    for label, motion, points, source in sequences:
+        print(label)
         frames_total += len(points)
         args_m = (motion.betas, motion.pose, motion.trans)
         runs = {}
         t0 = time.perf_counter()
-        ours = project_sequence(model, template.vertices, template.faces, points, *args_m,
-                                settings, start=draped.vertices)  # fmt: skip
-        runs["ours"] = (ours.canonical, np.linalg.norm(
-            model(torch.as_tensor(ours.canonical), *(torch.as_tensor(a) for a in args_m)
-                  ).vertices.detach().numpy() - points, axis=-1))  # fmt: skip
+        if stored is not None and source is not None:
+            ours = stored_projection(stored, source)
+        else:
+            ours = project_sequence(model, template.vertices, template.faces, points, *args_m,
+                                    settings, start=draped.vertices).canonical  # fmt: skip
         t1 = time.perf_counter()
+        with torch.no_grad():
+            again = model(torch.as_tensor(ours), *(torch.as_tensor(a) for a in args_m)).vertices
+        runs["ours"] = (ours, np.linalg.norm(again.numpy() - points, axis=-1))
         const = unpose_constant_weights(body, template, points, *args_m)
         t2 = time.perf_counter()
         near = unpose_nearest_vertex(body, points, *args_m)
@@ -151,22 +262,20 @@ def main() -> None:
         for name, result in (("constant weights", const), ("per-frame nearest vertex", near)):
             again = skin_body_vertices(body, result.canonical, result.body_vertex, *args_m)
             runs[name] = (result.canonical, np.linalg.norm(again - points, axis=-1))
-        for name, dt in (("ours", t1 - t0), ("constant weights", t2 - t1),
-                         ("per-frame nearest vertex", t3 - t2)):  # fmt: skip
-            seconds[name] = seconds.get(name, 0.0) + dt
+        for name, dt in zip(METHODS, (t1 - t0, t2 - t1, t3 - t2), strict=True):
+            totals[name].seconds += dt
         for name, (canonical, error) in runs.items():
-            m = measures(canonical, error, body, surface)
-            totals.setdefault(name, []).append(m)
-            print(f"  {name:26s} err mean {1e3 * m['err_mean']:6.3f} mm p99 "
-                  f"{1e3 * m['err_p99']:6.3f} mm | inside {100 * m['inside']:7.3f}% "
-                  f"<1 mm {100 * m['within_1mm']:7.3f}% | acc {m['acc']:6.3f} m/s²")  # fmt: skip
-    print(f"all {frames_total} frames:")
-    for name, ms in totals.items():
-        mean = {k: float(np.mean([m[k] for m in ms])) for k in ms[0]}
-        rate = frames_total / seconds[name]
-        print(f"  {name:26s} err mean {1e3 * mean['err_mean']:6.3f} mm | inside "
-              f"{100 * mean['inside']:7.3f}% <1 mm {100 * mean['within_1mm']:7.3f}% | "
-              f"acc {mean['acc']:6.3f} m/s² | {rate:8.2f} frames/s")  # fmt: skip
+            rest = np.repeat(rest_body[None], len(canonical), axis=0)
+            sdf = signed_distance(canonical, rest, surface).distance
+            print(line(name, totals[name].add(canonical, error, sdf)))
+    print(f"all {frames_total} frames, pooled over all vertices of all frames:")
+    for name, total in totals.items():
+        if stored is not None and name == "ours":
+            seconds = float(stored.metadata["seconds"])
+            rate = f"{len(stored.canonical) / seconds:.2f} frames/s over the whole file"
+        else:
+            rate = f"{frames_total / total.seconds:.2f} frames/s"
+        print(f"{line(name, total.pooled())} | {rate}")
 
 
 if __name__ == "__main__":
