@@ -74,6 +74,11 @@ def unique_edges(faces: np.ndarray) -> np.ndarray:
     return np.unique(np.sort(pairs, axis=1), axis=0)
 
 
+def edge_lengths(points: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """Lengths ``(..., E)`` (m) of ``edges`` ``(E, 2)`` over points ``(..., N, 3)`` (m)."""
+    return np.linalg.norm(points[..., edges[:, 0], :] - points[..., edges[:, 1], :], axis=-1)
+
+
 def check_frame(
     points: np.ndarray,
     body_distance: np.ndarray,
@@ -100,8 +105,7 @@ def check_frame(
         nan = float("nan")
         return FrameCheck(nan_count, nan, nan, nan, nan, nan)
     sdf = np.asarray(body_distance, dtype=np.float64)
-    lengths = np.linalg.norm(points[edges[:, 0]] - points[edges[:, 1]], axis=1)
-    ratio = lengths / np.maximum(rest_edge_lengths, 1e-12)
+    ratio = edge_lengths(points, edges) / np.maximum(rest_edge_lengths, 1e-12)
     return FrameCheck(
         nan_count=0,
         inside_share=float((sdf < 0).mean()),

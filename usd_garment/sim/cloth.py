@@ -17,7 +17,13 @@ from typing import Any
 
 import numpy as np
 
-from usd_garment.sim.checks import CheckLimits, FrameCheck, check_frame, unique_edges
+from usd_garment.sim.checks import (
+    CheckLimits,
+    FrameCheck,
+    check_frame,
+    edge_lengths,
+    unique_edges,
+)
 from usd_garment.sim.material import ClothMaterial
 
 #: Gravity along -Y (m/s²); our canonical frame is Y-up, metres.
@@ -410,7 +416,7 @@ def simulate_sequence(
     )  # fmt: skip
     edges = unique_edges(np.asarray(faces))
     rest = np.asarray(rest_vertices, dtype=np.float64)
-    rest_lengths = np.linalg.norm(rest[edges[:, 0]] - rest[edges[:, 1]], axis=1)
+    rest_lengths = edge_lengths(rest, edges)
 
     result = SimResult(points=np.zeros((0, sim.num_vertices, 3), dtype=np.float32))
     frames: list[np.ndarray] = []

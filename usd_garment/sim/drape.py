@@ -14,7 +14,7 @@ import torch
 from usd_garment.body.joints import NUM_BETAS, NUM_JOINTS
 from usd_garment.body.model import BodyModel
 from usd_garment.garment.template import GarmentTemplate
-from usd_garment.sim.checks import unique_edges
+from usd_garment.sim.checks import edge_lengths, unique_edges
 from usd_garment.sim.cloth import ITERATIONS, SUBSTEPS, GarmentSimulator
 from usd_garment.sim.material import ClothMaterial
 
@@ -114,9 +114,8 @@ def drape_template(
         previous = points
         frames += 1
     edges = unique_edges(faces)
-    rest_len = np.linalg.norm(rest[edges[:, 0]] - rest[edges[:, 1]], axis=1)
-    now_len = np.linalg.norm(previous[edges[:, 0]] - previous[edges[:, 1]], axis=1)
-    error = np.abs(now_len / np.maximum(rest_len, 1e-12) - 1.0)
+    ratio = edge_lengths(previous, edges) / np.maximum(edge_lengths(rest, edges), 1e-12)
+    error = np.abs(ratio - 1.0)
     sdf = sim.body_distance()
     draped = replace(template, vertices=previous.astype(np.float32))
     return DrapeResult(
