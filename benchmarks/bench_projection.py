@@ -23,7 +23,6 @@ vertices of all frames.
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -41,6 +40,7 @@ from usd_garment.canonical.unpose import (
     unpose_constant_weights,
     unpose_nearest_vertex,
 )
+from usd_garment.dataset import SPLITS, dataset_layers
 from usd_garment.eval.body_distance import BodySurface, signed_distance
 from usd_garment.fields.body_fields import load_body_fields
 from usd_garment.garment.library import load_template
@@ -122,20 +122,16 @@ def dataset_sequences(
     manifest: Path, splits: list[str], max_sequences: int | None, body: BodyModel, n: int
 ) -> Iterator[Sequence]:
     """The ok sequences of a simulated dataset in ``splits``, read from their USD layers."""
-    info = json.loads(manifest.read_text())
-    chosen = [q for q in info["sequences"] if q["status"] == "ok" and q["split"] in splits]
-    chosen.sort(key=lambda q: (splits.index(q["split"]), q["name"]))
+    layers = dataset_layers(manifest, splits)
+    chosen = list(zip(layers.names, layers.splits, layers.bodies, layers.garments, strict=True))
     chosen = chosen[:max_sequences]
-    print(f"{manifest}: {len(chosen)} ok sequences of {'+'.join(splits)}, "
-          f"{sum(q['frames'] for q in chosen)} frames")  # fmt: skip
-    for q in chosen:
-        garment = manifest.parent / q["files"]["garment"]
+    print(f"{manifest}: {len(chosen)} ok sequences of {'+'.join(splits)}")
+    for name, split, body_layer, garment in chosen:
         points, _, layer = read_garment_layer(garment)
         if points.shape[1] != n:
             raise SystemExit(f"{garment}: {points.shape[1]} vertices, the template has {n}")
-        motion, _ = read_smpl_motion(manifest.parent / q["files"]["body"], body)
-        label = f"{q['name']} ({q['split']}, {q['motion_kind']})"
-        yield label, match_frames(points, layer.time_codes, motion), points, garment
+        motion, _ = read_smpl_motion(body_layer, body)
+        yield f"{name} ({split})", match_frames(points, layer.time_codes, motion), points, garment
 
 
 class Totals:
@@ -233,7 +229,7 @@ def main() -> None:
     if args.manifest is None:
         sequences = simulated_sequences(body, args.lod, args.frames, args.sequences)
     else:
-        splits = ["train", "validation", "test"] if args.split == "all" else args.split.split(",")
+        splits = list(SPLITS) if args.split == "all" else args.split.split(",")
         sequences = dataset_sequences(
             args.manifest, splits, args.max_sequences, body, len(template.vertices)
         )

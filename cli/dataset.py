@@ -11,7 +11,7 @@ import click
 from tqdm import tqdm
 
 from usd_garment.cli.errors import user_errors
-from usd_garment.cli.options import json_option, lod_option, solver_options
+from usd_garment.cli.options import json_option, lod_option, solver_options, workers_option
 from usd_garment.dataset import MANIFEST_NAME, DatasetConfig, make_dataset
 from usd_garment.garment.template import GARMENT_NAMES
 from usd_garment.sim.material import ClothMaterial
@@ -37,13 +37,7 @@ def dataset() -> None:
     help="Body shapes: betas standard normal, clipped to ±sigma.",
 )
 @solver_options
-@click.option(
-    "--workers",
-    type=click.IntRange(1),
-    default=2,
-    show_default=True,
-    help="Processes, one sequence each at a time (one CPU core each).",
-)
+@workers_option
 @click.option("--resume", is_flag=True, help="Finish the dataset already in OUTPUT.")
 @click.option(
     "-o",

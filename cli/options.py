@@ -22,6 +22,13 @@ body_model_option = click.option(
     default=None,
     help="SMPL-layout body file (.npz/.pkl); default: the embedded free body.",
 )
+workers_option = click.option(
+    "--workers",
+    type=click.IntRange(1),
+    default=2,
+    show_default=True,
+    help="Processes, one sequence each at a time (one CPU core each).",
+)
 skeleton_option = click.option(
     "--skeleton", default=None, help="Skeleton prim path when the stage has several."
 )

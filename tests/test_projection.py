@@ -3,6 +3,8 @@ canonical body, and the unposing baselines invert their own skinning."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 import torch
@@ -155,6 +157,68 @@ def test_project_command_writes_the_canonical_set(tmp_path, body, template, moti
     np.testing.assert_allclose(data.betas[0], betas, atol=1e-6)
     assert data.error.max() < 2e-4
     assert data.metadata["garment"] == "tshirt" and data.metadata["lod"] == "low"
+
+
+def _write_dataset(folder, body, template, motion, posed):
+    """A 'dataset make'-like folder: two ok sequences (train, test) and a bad one."""
+    folder.mkdir()
+    body_path, sim_path = _write_inputs(folder, body, template, motion, posed)
+    files = {"body": body_path.name, "garment": sim_path.name}
+    sequences = [
+        {"name": "m00_s0", "split": "test", "status": "ok", "files": files},
+        {"name": "m01_s0", "split": "train", "status": "ok", "files": files},
+        {"name": "m02_s0", "split": "train", "status": "bad", "files": {}},
+    ]
+    manifest = {"format": 1, "garment": "tshirt", "lod": "low", "sequences": sequences}
+    (folder / "manifest.json").write_text(json.dumps(manifest))
+    return sim_path
+
+
+def test_project_manifest_with_workers_matches_one_process(tmp_path, body, template, motion):
+    model = GarmentModel(body, load_body_fields())
+    x = np.repeat(template.vertices[None], FRAMES, axis=0) * np.float32(1.01)
+    with torch.no_grad():
+        posed = model(torch.as_tensor(x), *(torch.as_tensor(a) for a in motion)).vertices.numpy()
+    sim_path = _write_dataset(tmp_path / "set", body, template, motion, posed)
+    outputs = {}
+    for workers in (1, 2):
+        out = tmp_path / f"canonical_{workers}.npz"
+        args = ["project", "--manifest", str(tmp_path / "set" / "manifest.json"), "-o", str(out),
+                "--iterations", "5", "--workers", str(workers)]  # fmt: skip
+        result = CliRunner().invoke(main, args)
+        assert result.exit_code == 0, result.output
+        outputs[workers] = load_canonical_set(out)
+    one, two = outputs[1], outputs[2]
+    # Splits in the default order (train, validation, test), the bad sequence left out.
+    assert one.splits == two.splits == ["train", "test"]
+    assert one.split_sequences("test") == [1]
+    assert one.sources == [str(sim_path)] * 2 and one.metadata["lod"] == "low"
+    # Same solve; only float rounding differs (one torch thread in the workers).
+    np.testing.assert_allclose(one.canonical, two.canonical, atol=1e-5)
+    assert one.error.max() < 2e-4
+    only_test = tmp_path / "test_only.npz"
+    args = ["project", "--manifest", str(tmp_path / "set"), "--split", "test", "-o",
+            str(only_test), "--iterations", "0"]  # fmt: skip
+    assert CliRunner().invoke(main, args).exit_code == 0
+    assert load_canonical_set(only_test).splits == ["test"]
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--split", "holdout"], "unknown split 'holdout'"),
+        (["--split", "validation"], "no ok sequence in the splits validation"),
+        (["sim.usdc"], "give either SIM_LAYER... with --body, or --manifest"),
+    ],
+)
+def test_project_manifest_bad_input(tmp_path, body, template, motion, extra, message):
+    rest = np.repeat(template.vertices[None], FRAMES, axis=0)
+    _write_dataset(tmp_path / "set", body, template, motion, rest)
+    out = tmp_path / "canonical.npz"
+    args = ["project", "--manifest", str(tmp_path / "set"), "-o", str(out), *extra]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code != 0 and message in result.output, result.output
+    assert "Traceback" not in result.output and not out.exists()
 
 
 def test_project_command_rejects_another_garment_mesh(tmp_path, body, template, motion):

@@ -14,7 +14,7 @@ from __future__ import annotations
 import json
 import multiprocessing
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -37,6 +37,8 @@ from usd_garment.usd.garment_read import read_garment_layer
 
 MANIFEST_NAME = "manifest.json"
 MANIFEST_FORMAT = 1
+#: The splits of a dataset, by motion.
+SPLITS = ("train", "validation", "test")
 #: Shares of the motions in the validation and test splits (the rest is train).
 VALIDATION_SHARE = TEST_SHARE = 0.15
 #: Called after each sequence with its manifest entry, sequences done and sequences to do.
@@ -248,6 +250,53 @@ def read_manifest(folder: str | Path) -> dict[str, Any]:
     return manifest
 
 
+@dataclass(frozen=True)
+class DatasetLayers:
+    """The ok sequences of a dataset, as layer paths (for ``usd-garment project``).
+
+    Attributes:
+        garment, lod: the simulated garment template.
+        names: sequence names (e.g. ``m03_s1``), by split (in the order asked) then name.
+        splits: the split of each sequence.
+        bodies, garments: the body layer and the simulated garment layer of each sequence.
+    """
+
+    garment: str
+    lod: str
+    names: list[str]
+    splits: list[str]
+    bodies: list[Path]
+    garments: list[Path]
+
+
+def dataset_layers(folder: str | Path, splits: Sequence[str] = SPLITS) -> DatasetLayers:
+    """The ok sequences in ``splits`` of the dataset in ``folder`` (or of the manifest file).
+
+    Raises:
+        FileNotFoundError: no manifest; ValueError: not a manifest, an unknown split, or no ok
+            sequence in those splits.
+    """
+    folder = Path(folder)
+    if folder.name == MANIFEST_NAME and folder.is_file():
+        folder = folder.parent
+    unknown = [s for s in splits if s not in SPLITS]
+    if unknown or not splits:
+        raise ValueError(f"unknown split '{unknown[0] if unknown else ''}' ({', '.join(SPLITS)})")
+    manifest = read_manifest(folder)
+    chosen = [q for q in manifest["sequences"] if q["status"] == "ok" and q["split"] in splits]
+    if not chosen:
+        raise ValueError(f"{folder}: no ok sequence in the splits {', '.join(splits)}")
+    chosen.sort(key=lambda q: (list(splits).index(q["split"]), q["name"]))
+    return DatasetLayers(
+        garment=manifest["garment"],
+        lod=manifest["lod"],
+        names=[q["name"] for q in chosen],
+        splits=[q["split"] for q in chosen],
+        bodies=[folder / q["files"]["body"] for q in chosen],
+        garments=[folder / q["files"]["garment"] for q in chosen],
+    )
+
+
 def _write_manifest(folder: Path, manifest: dict[str, Any]) -> None:
     ok = [s for s in manifest["sequences"] if s["status"] == "ok"]
     manifest["summary"] = {
@@ -324,8 +373,7 @@ def make_dataset(
         "material": config.material.to_dict(),
         "solver": solver,
         "splits": {
-            split: sorted({s.motion_index for s in specs if s.split == split})
-            for split in ("train", "validation", "test")
+            split: sorted({s.motion_index for s in specs if s.split == split}) for split in SPLITS
         },
         "sequences": list(entries.values()),
     }

@@ -8,6 +8,7 @@ Arrays (S sequences, T = ΣT_s frames in all, N garment vertices, F triangles):
     error ``(T,)``, max_error ``(T,)`` float32: mean and largest reprojection distance (m).
     template ``(N, 3)`` float32 and faces ``(F, 3)`` int32: the garment template.
     sources ``(S,)`` str: the simulated layer each sequence came from.
+    splits ``(S,)`` str: the split of each sequence ("train", "validation" or "test").
     metadata: a JSON string (garment, lod, body model, projection settings, package version).
 """
 
@@ -40,6 +41,7 @@ class CanonicalSet:
     template: np.ndarray
     faces: np.ndarray
     sources: list[str] = field(default_factory=list)
+    splits: list[str] = field(default_factory=list)
     metadata: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -49,6 +51,10 @@ class CanonicalSet:
     def sequence(self, s: int) -> slice:
         """Frames of sequence ``s`` as a slice into the per-frame arrays."""
         return slice(int(self.frame_offsets[s]), int(self.frame_offsets[s + 1]))
+
+    def split_sequences(self, split: str) -> list[int]:
+        """Indices of the sequences in ``split``."""
+        return [s for s, name in enumerate(self.splits) if name == split]
 
 
 def save_canonical_set(path: str | Path, data: CanonicalSet) -> None:
@@ -62,6 +68,7 @@ def save_canonical_set(path: str | Path, data: CanonicalSet) -> None:
             template=np.asarray(data.template, dtype=np.float32),
             faces=np.asarray(data.faces, dtype=np.int32),
             sources=np.array(data.sources, dtype=str),
+            splits=np.array(data.splits, dtype=str),
             metadata=np.array(json.dumps(data.metadata)),
         )  # fmt: skip
 
@@ -80,7 +87,8 @@ def load_canonical_set(path: str | Path) -> CanonicalSet:
         with np.load(path) as npz:
             values = {name: npz[name] for name in (*_ARRAYS, "template", "faces")}
             sources = [str(s) for s in npz["sources"]]
+            splits = [str(s) for s in npz["splits"]]
             metadata = json.loads(str(npz["metadata"]))
     except (OSError, KeyError, ValueError) as exc:
         raise ValueError(f"{path}: not a canonical training set file ({exc})") from exc
-    return CanonicalSet(**values, sources=sources, metadata=metadata)
+    return CanonicalSet(**values, sources=sources, splits=splits, metadata=metadata)

@@ -3,19 +3,24 @@ the library side of ``usd-garment project``."""
 
 from __future__ import annotations
 
+import multiprocessing
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+import torch
 
 from usd_garment import __version__
 from usd_garment.body.io import load_body_model
 from usd_garment.canonical.dataset import CanonicalSet, save_canonical_set
-from usd_garment.canonical.projection import ProjectionSettings, project_sequence
+from usd_garment.canonical.projection import Projection, ProjectionSettings, project_sequence
 from usd_garment.fields.body_fields import load_body_fields
 from usd_garment.garment.library import load_template
 from usd_garment.garment.model import GarmentModel
+from usd_garment.garment.template import GarmentTemplate
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.usd.garment_read import read_garment_layer
 from usd_garment.usd.read import read_smpl_motion
@@ -61,6 +66,37 @@ def match_frames(points: np.ndarray, garment_times: np.ndarray, motion: SmplMoti
     )
 
 
+#: The garment model and projection inputs of a worker process (set by ``_init_worker``).
+_WORKER: dict[str, Any] = {}
+
+
+def _init_worker(model: GarmentModel, template: GarmentTemplate, start: np.ndarray) -> None:
+    torch.set_num_threads(1)
+    _WORKER.update(model=model, template=template, start=start)
+
+
+def _project(
+    model: GarmentModel,
+    template: GarmentTemplate,
+    start: np.ndarray,
+    item: SequenceInput,
+    settings: ProjectionSettings,
+    progress: Callable[[int], None] | None = None,
+) -> Projection:
+    """Project one read sequence (see :func:`project_sequence`)."""
+    m = item.motion
+    return project_sequence(
+        model, template.vertices, template.faces, item.points, m.betas, m.pose, m.trans,
+        settings, progress, start,
+    )  # fmt: skip
+
+
+def _project_item(task: tuple[int, SequenceInput, ProjectionSettings]) -> tuple[int, Projection]:
+    """Project one sequence in a worker process; ``(index, result)``."""
+    index, item, settings = task
+    return index, _project(_WORKER["model"], _WORKER["template"], _WORKER["start"], item, settings)
+
+
 def project_layers(
     sim_layers: Sequence[str | Path],
     body_layers: Sequence[str | Path],
@@ -71,6 +107,8 @@ def project_layers(
     body_model: str | Path | None = None,
     fields: str | Path | None = None,
     settings: ProjectionSettings | None = None,
+    splits: Sequence[str] | None = None,
+    workers: int = 1,
     on_read: Callable[[int], None] | None = None,
     progress: Callable[[int], None] | None = None,
 ) -> CanonicalSet:
@@ -84,14 +122,21 @@ def project_layers(
         body_model: SMPL-layout body file; the embedded default body by default.
         fields: the body's diffused fields file; the default body's by default.
         settings: projection parameters.
+        splits: the split of each sequence ("train", "validation", "test"); all "train" by
+            default.
+        workers: processes projecting one sequence each at a time (spawned, one torch thread
+            each); 1 projects in this process.
         on_read: called once with the total number of frames after all inputs are read.
-        progress: called with the number of frames projected so far.
+        progress: called with the number of frames projected so far (after each chunk of
+            frames with one worker, after each sequence with several).
 
     Raises:
         ValueError, FileNotFoundError, UsdInputError, BodyModelError: bad input.
     """
+    started = time.perf_counter()
     settings = settings or ProjectionSettings()
     output = Path(output)
+    splits = ["train"] * len(sim_layers) if splits is None else list(splits)
     if output.suffix != ".npz":
         raise ValueError(f"{output}: the output must be an .npz file")
     if not output.parent.is_dir():
@@ -101,6 +146,12 @@ def project_layers(
             f"give one body layer per simulated layer, or one for all "
             f"({len(sim_layers)} simulated, {len(body_layers)} body layers)"
         )
+    if len(splits) != len(sim_layers):
+        raise ValueError(
+            f"give one split per simulated layer ({len(splits)} for {len(sim_layers)})"
+        )
+    if workers < 1:
+        raise ValueError("workers must be >= 1")
     body = load_body_model(body_model)
     body_fields = load_body_fields(fields)
     if body_fields.body_name != body.name:
@@ -128,35 +179,46 @@ def project_layers(
     if on_read is not None:
         on_read(total)
     model = GarmentModel(body, body_fields)
-    results = []
+    results: list[Projection | None] = [None] * len(inputs)
+    tasks = [(k, item, settings) for k, item in enumerate(inputs)]
     done = 0
-    for item in inputs:
-        m = item.motion
-        result = project_sequence(
-            model, template.vertices, template.faces, item.points, m.betas, m.pose, m.trans,
-            settings, None if progress is None else (lambda n, d=done: progress(d + n)), start,
-        )  # fmt: skip
-        results.append(result)
-        done += len(item.points)
+    if workers == 1 or len(tasks) == 1:
+        for k, item, _ in tasks:
+            step = None if progress is None else (lambda n, d=done: progress(d + n))
+            results[k] = _project(model, template, start, item, settings, step)
+            done += len(item.points)
+    else:
+        context = multiprocessing.get_context("spawn")
+        pool_size = min(workers, len(tasks))
+        with context.Pool(pool_size, _init_worker, (model, template, start)) as pool:
+            for k, result in pool.imap_unordered(_project_item, tasks):
+                results[k] = result
+                done += len(inputs[k].points)
+                if progress is not None:
+                    progress(done)
+    finished = [r for r in results if r is not None]
     data = CanonicalSet(
-        canonical=np.concatenate([r.canonical for r in results]),
+        canonical=np.concatenate([r.canonical for r in finished]),
         frame_offsets=np.cumsum([0] + [len(i.points) for i in inputs]),
         betas=np.stack([i.motion.betas for i in inputs]),
         pose=np.concatenate([i.motion.pose for i in inputs]),
         trans=np.concatenate([i.motion.trans for i in inputs]),
         fps=np.array([i.motion.fps for i in inputs]),
-        error=np.concatenate([r.error for r in results]),
-        max_error=np.concatenate([r.max_error for r in results]),
+        error=np.concatenate([r.error for r in finished]),
+        max_error=np.concatenate([r.max_error for r in finished]),
         template=template.vertices,
         faces=template.faces,
         sources=[str(i.source) for i in inputs],
+        splits=splits,
         metadata={
             "garment": garment,
             "lod": lod,
             "body_model": body.name,
             "fields_body": body_fields.body_name,
             "projection": settings.to_json(),
-            "seconds": sum(r.seconds for r in results),
+            "workers": workers,
+            "seconds": sum(r.seconds for r in finished),
+            "wall_seconds": time.perf_counter() - started,
             "usd_garment_version": __version__,
         },
     )
