@@ -5,7 +5,9 @@ layers, independently of the simulator's own checks (signed distances from
 
 Criteria: no NaN; ≤ 0.1 % of vertices inside the body on average; no frame with a vertex
 farther than 10 cm from the body surface; edge stretch p99 ≤ 1.15 (current / rest length, rest
-= the template graded to the sequence's body shape, as simulated); and seconds per frame.
+= the template graded to the sequence's body shape, as simulated), printed both pooled over all
+edges of all frames and as the worst frame's own p99 (the stricter reading); and seconds per
+frame.
 For reference beside the garment's stretch, the body's own skin stretch under skinning (posed /
 shaped rest edge lengths of the body mesh, p99 per frame): a garment in contact follows it.
 
@@ -70,7 +72,8 @@ def measure(folder: Path, motions: int | None = None, shapes: int | None = None)
         posed = posed_body_vertices(body, motion)
         sdf = signed_distance(points, posed, surface).distance
         rest = template.vertices + shape_offsets(body, template.vertices, motion.betas)
-        stretch = np.percentile(edge_lengths(points, edges) / edge_lengths(rest, edges), 99, axis=1)
+        ratio = (edge_lengths(points, edges) / edge_lengths(rest, edges)).astype(np.float32)
+        stretch = np.percentile(ratio, 99, axis=1)
         with torch.no_grad():
             body_rest = body.shaped(torch.as_tensor(motion.betas)[None])[0][0].numpy()
         skin_ratio = edge_lengths(posed, body_edges) / edge_lengths(body_rest, body_edges)
@@ -80,6 +83,7 @@ def measure(folder: Path, motions: int | None = None, shapes: int | None = None)
             "inside": (sdf < 0).mean(axis=1),
             "distance": np.abs(sdf).max(axis=1),
             "stretch": stretch,
+            "ratio": ratio,
             "skin": skin,
             "s_per_frame": entry["checks"]["seconds_per_frame"],
             "retried": len(entry["checks"]["retries"]),
@@ -102,6 +106,8 @@ def measure(folder: Path, motions: int | None = None, shapes: int | None = None)
     far_frames = sum(int((r["distance"] > MAX_DISTANCE).sum()) for r in good)
     stretch_max = max(float(r["stretch"].max()) for r in good)
     stretch_over = sum(int((r["stretch"] > MAX_STRETCH_P99).sum()) for r in good)
+    ratios = np.concatenate([r["ratio"].ravel() for r in good])
+    pooled = float(np.percentile(ratios, 99))
     skin_there = np.concatenate([r["skin"][r["stretch"] > MAX_STRETCH_P99] for r in good])
     skin_note = (
         f"; the body's own skin stretch p99 on those frames: median {np.median(skin_there):.3f}"
@@ -120,8 +126,11 @@ def measure(folder: Path, motions: int | None = None, shapes: int | None = None)
         f"[{'PASS' if inside_mean <= MAX_INSIDE_MEAN else 'FAIL'} ≤ 0.1%]\n"
         f"largest distance from the body: {distance:.3f} m, frames over 10 cm: {far_frames} "
         f"[{'PASS' if far_frames == 0 else 'FAIL'}]\n"
-        f"edge stretch p99, worst frame: {stretch_max:.3f}, frames over 1.15: {stretch_over} of "
-        f"{frames} [{'PASS' if stretch_over == 0 else 'FAIL'}]{skin_note}\n"
+        f"edge stretch p99 over all edges of all frames: {pooled:.3f}, edges over 1.15: "
+        f"{100 * float((ratios > MAX_STRETCH_P99).mean()):.3f}% "
+        f"[{'PASS' if pooled <= MAX_STRETCH_P99 else 'FAIL'} ≤ 1.15]\n"
+        f"edge stretch p99 per frame, worst frame: {stretch_max:.3f}, frames over 1.15: "
+        f"{stretch_over} of {frames} [{'PASS' if stretch_over == 0 else 'FAIL'}]{skin_note}\n"
         f"seconds per simulated frame (lead-in included): mean "
         f"{np.mean([r['s_per_frame'] for r in good]):.3f}, max "
         f"{max(r['s_per_frame'] for r in good):.3f}"
