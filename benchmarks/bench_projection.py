@@ -268,7 +268,12 @@ def main() -> None:
     for name, total in totals.items():
         if stored is not None and name == "ours":
             seconds = float(stored.metadata["seconds"])
-            rate = f"{len(stored.canonical) / seconds:.2f} frames/s over the whole file"
+            wall = float(stored.metadata["wall_seconds"])
+            rate = (
+                f"{len(stored.canonical) / seconds:.2f} frames/s per worker, "
+                f"{len(stored.canonical) / wall:.2f} frames/s wall with "
+                f"{stored.metadata['workers']} worker(s), over the whole file"
+            )
         else:
             rate = f"{frames_total / total.seconds:.2f} frames/s"
         print(f"{line(name, total.pooled())} | {rate}")
