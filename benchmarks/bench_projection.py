@@ -16,7 +16,7 @@ distance to the β = 0 T-pose body mesh), mean per-vertex acceleration of X in c
 vertices of all frames.
 
     python benchmarks/bench_projection.py [--lod high] [--frames 60] [--iterations 40]
-    python benchmarks/bench_projection.py --manifest scratch/dataset_tshirt/manifest.json \
+    python benchmarks/bench_projection.py --manifest scratch/dataset_tshirt_v2/manifest.json \
         --split validation,test [--max-sequences K] [--canonical set.npz]
 """
 
