@@ -1,9 +1,14 @@
-"""Signed distance of points to a posed body mesh, per frame: the collision query that the push-out
-post-process and the collision metrics share.
+"""Signed distance of points to a posed body mesh, per frame: the collision query that the
+metrics, the push-out post-process and the simulator's frame checks share.
 
-The closest point is searched among the triangles with the nearest centroids (a k-d tree per
-frame), and the sign comes from the angle-weighted pseudo-normal of the closest feature (face,
-edge or vertex; Bærentzen & Aanæs 2005), which is exact for a closed, consistently wound mesh.
+Inside means a generalized winding number above 0.5 against the posed body (libigl's fast
+winding number), which stays right where the body intersects itself (an arm pressed into the
+trunk) and across small holes; the sign of the nearest feature's pseudo-normal does not.
+An inside point is *forced* when its closest body point lies itself inside the body (probed
+just outside that surface): the animation pushes a limb into the trunk there and no garment can
+be outside; the rest is *elsewhere*, the garment method's fault. The closest point is searched
+among the triangles with the nearest centroids (a k-d tree per frame); its angle-weighted
+pseudo-normal (Bærentzen & Aanæs 2005) gives the push-out direction.
 Shapes: T frames, N query points, V body vertices, F body faces. Units: metres.
 """
 
@@ -11,6 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import igl
 import numpy as np
 import torch
 from scipy.spatial import cKDTree
@@ -19,6 +25,11 @@ from scipy.spatial import cKDTree
 NEAREST_FACES = 12
 #: Point-triangle pairs evaluated at once (bounds the memory of one chunk).
 PAIRS_PER_CHUNK = 1_000_000
+#: A point is inside the body where its generalized winding number exceeds this.
+WINDING_INSIDE = 0.5
+#: How far outside its own surface a closest point is probed to tell whether it lies inside
+#: another part of the body (m): body parts closer than this count as touching.
+FORCED_PROBE = 5e-4
 
 
 @dataclass
@@ -26,14 +37,34 @@ class BodyDistance:
     """Result of :func:`signed_distance`.
 
     Attributes:
-        distance: ``(T, N)`` signed distance (m), negative inside the body.
+        distance: ``(T, N)`` signed distance (m) to the closest body surface, negative inside
+            the body (winding number > 0.5).
         closest: ``(T, N, 3)`` closest point on the body surface (m).
         normal: ``(T, N, 3)`` unit pseudo-normal of the body at the closest point.
+        closest_inside: ``(T, N)`` whether the closest point lies inside another part of the
+            body; only probed where ``distance`` is below the query's ``probe_below``
+            (False elsewhere).
     """
 
     distance: np.ndarray
     closest: np.ndarray
     normal: np.ndarray
+    closest_inside: np.ndarray
+
+    @property
+    def inside(self) -> np.ndarray:
+        """``(T, N)`` bool: inside the body."""
+        return self.distance < 0
+
+    @property
+    def forced(self) -> np.ndarray:
+        """``(T, N)`` bool: inside where a limb is pressed into the body (forced by the pose)."""
+        return self.inside & self.closest_inside
+
+    @property
+    def elsewhere(self) -> np.ndarray:
+        """``(T, N)`` bool: inside the body, not forced (the garment's fault)."""
+        return self.inside & ~self.closest_inside
 
 
 class BodySurface:
@@ -144,16 +175,32 @@ def _closest_on_triangles(
     return best, code
 
 
+def winding_numbers(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Generalized winding numbers ``(M,)`` of ``points`` ``(M, 3)`` (m) against the triangle
+    mesh ``vertices`` ``(V, 3)`` (m), ``faces`` ``(F, 3)``: ~1 inside, ~0 outside, ~2 where two
+    parts overlap (libigl's fast winding number)."""
+    if len(points) == 0:
+        return np.zeros(0)
+    return igl.fast_winding_number(
+        np.ascontiguousarray(vertices, dtype=np.float64),
+        np.ascontiguousarray(faces, dtype=np.int64),
+        np.ascontiguousarray(points, dtype=np.float64),
+    )
+
+
 def signed_distance(
     points: np.ndarray | torch.Tensor,
     body_vertices: np.ndarray | torch.Tensor,
     surface: BodySurface,
     nearest: int = NEAREST_FACES,
+    probe_below: float = 0.0,
 ) -> BodyDistance:
     """Signed distance of ``points`` ``(T, N, 3)`` to the body ``(T, V, 3)``, frame by frame.
 
     The closest point is searched among the ``nearest`` triangles whose centroids are nearest
-    (a k-d tree per frame); computed in float32.
+    (a k-d tree per frame), in float32; the sign is the winding-number inside test. Where the
+    signed distance is below ``probe_below`` (m; 0: the inside points only), the closest point
+    is probed ``FORCED_PROBE`` outside its surface for lying inside the body.
     """
     pts = torch.as_tensor(points).float()
     verts = torch.as_tensor(body_vertices).float()
@@ -188,9 +235,17 @@ def signed_distance(
         at_vertex = (code >= 4).nonzero(as_tuple=True)
         if at_vertex[0].numel():
             pseudo[at_vertex] = surface.vertex_normals(v, at_vertex[0], corner[at_vertex])
-        offset = p - q
-        sign = torch.where((offset * pseudo).sum(-1) < 0, -1.0, 1.0)
-        dist[s : s + b] = (sign * offset.norm(dim=-1)).numpy()
         closest[s : s + b] = q.numpy()
         normal[s : s + b] = pseudo.numpy()
-    return BodyDistance(dist, closest, normal)
+        dist[s : s + b] = (p - q).norm(dim=-1).numpy()
+    faces = surface.faces.numpy()
+    closest_inside = np.zeros((t_frames, n), dtype=bool)
+    for t in range(t_frames):
+        body = verts[t].numpy()
+        inside = winding_numbers(pts[t].numpy(), body, faces) > WINDING_INSIDE
+        dist[t] = np.where(inside, -dist[t], dist[t])
+        probe = np.flatnonzero(dist[t] < probe_below)
+        if probe.size:
+            at = closest[t, probe] + FORCED_PROBE * normal[t, probe]
+            closest_inside[t, probe] = winding_numbers(at, body, faces) > WINDING_INSIDE
+    return BodyDistance(dist, closest, normal, closest_inside)
