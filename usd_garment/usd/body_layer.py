@@ -4,6 +4,13 @@ joint orientations), SkelAnimation, ``SmplBodyAPI`` betas and the skinned body m
 Layout: ``/Character`` (Xform, the default prim) / ``Body`` (SkelRoot) / ``Skeleton``,
 ``Animation`` and ``Mesh``; Y-up, metres, ``timeCodesPerSecond`` = the motion's fps. Garment
 layers put their meshes beside the SkelRoot, under ``/Character/Garments``.
+
+The mesh is the shaped rest body (at the motion's betas) with every non-zero skinning weight of
+the body model and an identity ``geomBindTransform``, so UsdSkel's skinning of it is the body
+model's LBS (``BodyModel(betas, pose, trans).vertices``) up to float32 rounding (< 1 µm on the
+embedded body): the body a user sees is the body garments are fitted against. Pose blendshapes
+(SMPL's ``posedirs``; the embedded body has none) are not written: a body with them is skinned
+by USD without its pose correctives.
 """
 
 from __future__ import annotations
@@ -27,7 +34,8 @@ SKELETON_PATH = f"{SKEL_ROOT_PATH}/Skeleton"
 ANIMATION_PATH = f"{SKEL_ROOT_PATH}/Animation"
 MESH_PATH = f"{SKEL_ROOT_PATH}/Mesh"
 
-#: Skinning influences kept per vertex in the USD mesh.
+#: The largest number of skinning influences per vertex that ``top_weights`` keeps by default.
+#: Kept for callers that want a compact rig; :func:`write_body_layer` writes every influence.
 MAX_INFLUENCES = 4
 
 
@@ -45,6 +53,28 @@ def top_weights(weights: np.ndarray, k: int = MAX_INFLUENCES) -> tuple[np.ndarra
     total = top.sum(axis=1, keepdims=True)
     top = np.where(total > 0, top / np.where(total > 0, total, 1.0), 1.0 / k)
     return order.astype(np.int32), top.astype(np.float32)
+
+
+def all_weights(weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every non-zero skinning weight of each vertex, as UsdSkel's fixed-size influences.
+
+    The element size is the largest count of non-zero weights of any vertex; vertices with fewer
+    are padded with joint 0 / weight 0, which UsdSkel skins to nothing. Weights are written as
+    given (not renormalised), so USD's skinning is the body model's LBS.
+
+    Args:
+        weights: ``(V, J)`` skinning weights (≥ 0; each row sums to 1 in a body model).
+
+    Returns:
+        joint indices ``(V, K)`` int32 and weights ``(V, K)`` float32, largest first, with
+        ``K`` = max over vertices of the non-zero weights (at least 1).
+    """
+    weights = np.asarray(weights)
+    k = max(1, int((weights != 0).sum(axis=1).max(initial=0)))
+    order = np.argsort(-weights, axis=1, kind="stable")[:, :k]
+    kept = np.take_along_axis(weights, order, axis=1)
+    order = np.where(kept != 0, order, 0)
+    return order.astype(np.int32), kept.astype(np.float32)
 
 
 def write_body_layer(
@@ -125,7 +155,8 @@ def _author_skeleton(stage: Usd.Stage, motion: SmplMotion, rest_joints: np.ndarr
 
 
 def _author_mesh(stage: Usd.Stage, body: BodyModel, rest_vertices: np.ndarray) -> None:
-    """The body mesh at its shaped rest pose ``(V, 3)`` (m), skinned with the top-4 weights."""
+    """The body mesh at its shaped rest pose ``(V, 3)`` (m), skinned with every non-zero weight
+    of the body model (see :func:`all_weights`)."""
     mesh = UsdGeom.Mesh.Define(stage, MESH_PATH)
     faces = body.faces.numpy().astype(np.int32)
     points = np.ascontiguousarray(rest_vertices, dtype=np.float32)
@@ -134,14 +165,11 @@ def _author_mesh(stage: Usd.Stage, body: BodyModel, rest_vertices: np.ndarray) -
     mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(faces.reshape(-1)))
     mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
     mesh.CreateExtentAttr(Vt.Vec3fArray.FromNumpy(np.stack([points.min(0), points.max(0)])))
-    indices, weights = top_weights(body.weights.numpy())
+    indices, weights = all_weights(body.weights.numpy())
+    size = indices.shape[1]
     binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
-    binding.CreateJointIndicesPrimvar(False, MAX_INFLUENCES).Set(
-        Vt.IntArray.FromNumpy(indices.reshape(-1))
-    )
-    binding.CreateJointWeightsPrimvar(False, MAX_INFLUENCES).Set(
-        Vt.FloatArray.FromNumpy(weights.reshape(-1))
-    )
+    binding.CreateJointIndicesPrimvar(False, size).Set(Vt.IntArray.FromNumpy(indices.reshape(-1)))
+    binding.CreateJointWeightsPrimvar(False, size).Set(Vt.FloatArray.FromNumpy(weights.reshape(-1)))
     binding.CreateGeomBindTransformAttr(Gf.Matrix4d(1.0))
     binding.CreateSkeletonRel().SetTargets([Sdf.Path(SKELETON_PATH)])
 
