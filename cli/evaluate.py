@@ -15,9 +15,12 @@ from usd_garment.eval.evaluate import evaluate_layer
 #: Rows of the summary table: key, label, format.
 ROWS = (
     ("inside_share", "vertices inside the body", "{:.3%}"),
+    ("inside_forced_share", "  forced (limb pressed in body)", "{:.3%}"),
+    ("inside_elsewhere_share", "  elsewhere (the method's)", "{:.3%}"),
     ("within_1mm_share", "vertices within 1 mm", "{:.3%}"),
     ("mean_penetration_mm", "mean penetration depth (mm)", "{:.3f}"),
     ("max_penetration_mm", "max penetration depth (mm)", "{:.3f}"),
+    ("max_elsewhere_mm", "max depth elsewhere (mm)", "{:.3f}"),
     ("reference_mm", "mean distance to reference (mm)", "{:.3f}"),
     ("acceleration", "mean vertex acceleration (m/s²)", "{:.3f}"),
     ("nan_count", "NaN vertices (all frames)", "{:d}"),

@@ -1,5 +1,6 @@
 """Garment quality figures per frame and over a sequence: collisions with the posed body (share of
-vertices inside and within 1 mm, penetration depth), distance to a reference, jitter and NaNs."""
+vertices inside by winding number, split into forced and elsewhere, and within 1 mm of the
+surface; penetration depth), distance to a reference, jitter and NaNs."""
 
 from __future__ import annotations
 
@@ -19,10 +20,15 @@ class GarmentMetrics:
     """Per-frame figures ``(T,)`` of a posed garment sequence.
 
     Attributes:
-        inside_share: share of (finite) garment vertices inside the body (signed distance < 0).
-        within_1mm_share: share with signed distance < 1 mm (inside included).
+        inside_share: share of (finite) garment vertices inside the body (winding number > 0.5).
+        inside_forced_share: share inside where the closest body point lies itself inside the
+            body (a limb pressed into the trunk: forced on any garment by the animation).
+        inside_elsewhere_share: share inside elsewhere (the garment method's fault).
+        within_1mm_share: share with signed distance to the body surface < 1 mm (inside
+            included).
         mean_penetration_mm: mean depth of the vertices inside the body (mm); 0 when none.
         max_penetration_mm: largest depth inside the body (mm); 0 when none.
+        max_elsewhere_mm: largest depth of the vertices inside elsewhere (mm); 0 when none.
         reference_mm: mean per-vertex distance to a reference sequence (mm); NaN without one.
         acceleration: mean per-vertex acceleration magnitude (m/s²), central second difference;
             NaN on the first and last frame.
@@ -30,9 +36,12 @@ class GarmentMetrics:
     """
 
     inside_share: np.ndarray
+    inside_forced_share: np.ndarray
+    inside_elsewhere_share: np.ndarray
     within_1mm_share: np.ndarray
     mean_penetration_mm: np.ndarray
     max_penetration_mm: np.ndarray
+    max_elsewhere_mm: np.ndarray
     reference_mm: np.ndarray
     acceleration: np.ndarray
     nan_count: np.ndarray
@@ -47,7 +56,7 @@ class GarmentMetrics:
                 out[name] = int(arr.sum())
             elif finite.size == 0:
                 out[name] = None
-            elif name == "max_penetration_mm":
+            elif name.startswith("max_"):
                 out[name] = float(finite.max())
             else:
                 out[name] = float(finite.mean())
@@ -56,9 +65,12 @@ class GarmentMetrics:
     def per_frame(self) -> dict[str, np.ndarray]:
         return {
             "inside_share": self.inside_share,
+            "inside_forced_share": self.inside_forced_share,
+            "inside_elsewhere_share": self.inside_elsewhere_share,
             "within_1mm_share": self.within_1mm_share,
             "mean_penetration_mm": self.mean_penetration_mm,
             "max_penetration_mm": self.max_penetration_mm,
+            "max_elsewhere_mm": self.max_elsewhere_mm,
             "reference_mm": self.reference_mm,
             "acceleration": self.acceleration,
             "nan_count": self.nan_count,
@@ -90,10 +102,12 @@ def evaluate_garment(
     finite = np.isfinite(points).all(axis=-1)  # (T, N)
     safe = np.where(finite[..., None], points, 0.0)
     surface = BodySurface(body_faces, body_vertices.shape[1])
-    dist = signed_distance(safe, body_vertices, surface).distance
-    dist = np.where(finite, dist, np.nan)
+    query = signed_distance(safe, body_vertices, surface)
+    dist = np.where(finite, query.distance, np.nan)
     count = np.maximum(finite.sum(axis=1), 1)
     inside = dist < 0
+    forced = query.forced & finite
+    elsewhere = query.elsewhere & finite
     depth = np.where(inside, -dist, 0.0)
     n_inside = inside.sum(axis=1)
     reference_mm = np.full(t_frames, np.nan)
@@ -110,9 +124,12 @@ def evaluate_garment(
         acceleration[1:-1] = np.nanmean(np.where(ok.any(axis=1)[:, None], norm, 0.0), axis=1)
     return GarmentMetrics(
         inside_share=n_inside / count,
+        inside_forced_share=forced.sum(axis=1) / count,
+        inside_elsewhere_share=elsewhere.sum(axis=1) / count,
         within_1mm_share=(dist < CONTACT_BAND).sum(axis=1) / count,
         mean_penetration_mm=1e3 * depth.sum(axis=1) / np.maximum(n_inside, 1),
         max_penetration_mm=1e3 * depth.max(axis=1, initial=0.0),
+        max_elsewhere_mm=1e3 * np.where(elsewhere, depth, 0.0).max(axis=1, initial=0.0),
         reference_mm=reference_mm,
         acceleration=acceleration,
         nan_count=n - finite.sum(axis=1),

@@ -1,5 +1,7 @@
 """The common collision post-process of garment baselines: push garment vertices that are inside
-the posed body, or closer than ε to it, out along the body normal to ε outside."""
+the posed body (by winding number), or closer than ε to it, out along the body normal to ε
+outside. Vertices whose closest body point lies itself inside the body (a limb pressed into the
+trunk) have no outside to go to and stay where they are."""
 
 from __future__ import annotations
 
@@ -20,7 +22,8 @@ def push_out(
     eps: float = PUSH_OUT_EPS,
     passes: int = PUSH_OUT_PASSES,
 ) -> np.ndarray:
-    """Move every point closer than ``eps`` to the body (or inside it) to ``eps`` outside.
+    """Move every point closer than ``eps`` to the body (or inside it) to ``eps`` outside,
+    unless its closest body point lies inside another part of the body.
 
     Args:
         points: ``(T, N, 3)`` posed garment points (m).
@@ -28,7 +31,7 @@ def push_out(
         surface: the body's topology.
         eps: target distance outside the body (m).
         passes: how many times to re-check the moved points (a push can land a vertex inside
-            another body part in a crease).
+            another body part in a crease, e.g. out of the trunk into the arm).
 
     Returns:
         ``(T, N, 3)`` pushed points, the input's dtype.
@@ -38,8 +41,8 @@ def push_out(
     for _ in range(passes):
         if columns.size == 0:
             break
-        query = signed_distance(out[:, columns], body_vertices, surface)
-        near = query.distance < eps  # (T, C)
+        query = signed_distance(out[:, columns], body_vertices, surface, probe_below=eps)
+        near = (query.distance < eps) & ~query.closest_inside  # (T, C)
         if not near.any():
             break
         pushed = query.closest + eps * query.normal
