@@ -10,7 +10,12 @@ import numpy as np
 from usd_garment.body import NUM_BETAS, load_body_model
 from usd_garment.cli.errors import user_errors
 from usd_garment.cli.options import body_model_option
-from usd_garment.motion.procedural import MOTION_KINDS, make_motion, random_betas
+from usd_garment.motion.procedural import (
+    ARM_CLEARANCE,
+    MOTION_KINDS,
+    make_motion,
+    random_betas,
+)
 from usd_garment.usd.body_layer import write_body_layer
 
 USD_SUFFIXES = (".usd", ".usda", ".usdc")
@@ -63,6 +68,12 @@ def _betas(text: str | None, seed: int) -> np.ndarray | None:
     help="Body shape: up to 10 numbers ('0.5,-1'), or 'random' (clipped normal, seeded by "
     "--seed). Default: the mean shape.",
 )
+@click.option(
+    "--open-shoulders",
+    is_flag=True,
+    help=f"Open the shoulders wherever an arm would come within {100 * ARM_CLEARANCE:g} cm of "
+    "the torso. Default: arms may hang against the trunk, as in motion capture.",
+)
 @body_model_option
 def make(
     kind: str,
@@ -71,6 +82,7 @@ def make(
     fps: float,
     seed: int,
     betas: str | None,
+    open_shoulders: bool,
     body_model: Path | None,
 ) -> None:
     """Write a procedural motion of KIND as a playable USD body layer (skeleton, animation and
@@ -80,6 +92,8 @@ def make(
     shape = _betas(betas, seed)
     with user_errors():
         body = load_body_model(body_model)
-        result = make_motion(kind, frames, fps, seed=seed, betas=shape, body=body)
+        result = make_motion(
+            kind, frames, fps, seed=seed, betas=shape, body=body, open_shoulders=open_shoulders
+        )
         write_body_layer(output, result, body)
     click.echo(f"wrote {output}: {kind}, {result.num_frames} frames at {result.fps:g} fps")

@@ -9,10 +9,10 @@ the cloth simulator starts from the garment on the rest body. The root translati
 body: the lowest point of the feet stays on the floor (the rest sole height; within about a
 centimetre, as that height is smoothed over :data:`LIFT_SMOOTHING`) except during jumps; walk
 and run move forward along the heading (+Z, turning slowly) at the average speed at which the
-stance foot moves backwards; in place, the feet stay where they are on average. The arms
-keep :data:`ARM_CLEARANCE` from the torso whatever the body shape: where the skinned body's
-arm comes closer, the shoulders open sideways (smoothly over time) until it does, as a
-garment needs room between arm and torso and real arms rarely press into the trunk.
+stance foot moves backwards; in place, the feet stay where they are on average. The arms may
+hang against the trunk, as they do in motion capture; optionally (``open_shoulders``) they keep
+:data:`ARM_CLEARANCE` from the torso whatever the body shape: where the skinned body's arm comes
+closer, the shoulders open sideways (smoothly over time) until it does.
 """
 
 from __future__ import annotations
@@ -345,6 +345,7 @@ def make_motion(
     seed: int = 0,
     betas: np.ndarray | None = None,
     body: BodyModel | None = None,
+    open_shoulders: bool = False,
 ) -> SmplMotion:
     """A procedural SMPL motion.
 
@@ -356,6 +357,8 @@ def make_motion(
         betas: ``(≤10,)`` body shape (zero-padded), default the mean shape.
         body: the body the motion is made for (its soles keep the feet on the floor); default
             the embedded body.
+        open_shoulders: open the shoulders sideways wherever an arm would come closer than
+            :data:`ARM_CLEARANCE` to the torso (off: arms may press against the trunk).
 
     Returns:
         The motion: pose ``(T, 24, 3)`` axis-angle (rad) within the joint limits, trans
@@ -383,7 +386,8 @@ def make_motion(
     weight = blend_in(t)
     plan = _GENERATORS[kind](t, np.random.default_rng(seed))
     euler = plan.euler * weight[:, None, None]
-    euler = _open_arms(body, shape, euler, weight, fps)
+    if open_shoulders:
+        euler = _open_arms(body, shape, euler, weight, fps)
     heading = np.concatenate([[0.0], np.cumsum(plan.yaw_rate * weight[1:]) / fps])
     pose = clamp_to_limits(euler_to_pose(euler))
     root = Rotation.from_rotvec(heading[:, None] * [0.0, 1.0, 0.0]) * Rotation.from_rotvec(
