@@ -57,11 +57,13 @@ def test_dress_json_summary_and_eval(body_layer: Path, tmp_path: Path) -> None:
     assert code == 0 and "vertices inside the body" in stdout
 
 
-def _assert_clean_failure(args: list[str], folder: Path, source: Path | None) -> str:
+def _assert_clean_failure(
+    args: list[str], folder: Path, source: Path | None, exit_code: int | None = None
+) -> str:
     before = {p: p.read_bytes() for p in folder.rglob("*") if p.is_file()}
     digest = hashlib.sha256(source.read_bytes()).hexdigest() if source and source.exists() else None
     code, stdout, stderr = _run(args)
-    assert code != 0
+    assert code != 0 and (exit_code is None or code == exit_code), code
     message = stderr.strip()
     assert message.startswith("Error:") and "\n" not in message, message
     assert "Traceback" not in stdout + stderr
@@ -80,6 +82,33 @@ def test_bad_input_files(bad: Path, tmp_path: Path) -> None:
 
 def test_bad_corpus_is_there() -> None:
     assert len(BAD_INPUTS) >= 5
+    assert set(EXPECTED_ERRORS) <= {p.name for p in BAD_INPUTS}
+
+
+#: The one-line error ``dress`` gives for inputs that UsdSkel reads without complaint (or only
+#: with a warning), after the file name and skeleton path.
+EXPECTED_ERRORS = {
+    "wrong_count_rotations.usda": "the SkelAnimation /Char/Skel/Anim has 23 rotations for its "
+    "24 joints at time code 1",
+    "wrong_count_translations.usda": "the SkelAnimation /Char/Skel/Anim has 23 translations for "
+    "its 24 joints at time code 1",
+    "wrong_count_scales.usda": "the SkelAnimation /Char/Skel/Anim has 23 scales for its 24 "
+    "joints at time code 1",
+    "huge_betas.usda": "smpl:betas: betas[0] = 1e+06 is outside the body's shape space "
+    "(|beta| <= 5)",
+    "no_animation_values.usda": "no animation: the SkelAnimation /Char/Skel/Anim has no time "
+    "samples and no default values on its rotations and translations",
+}
+
+
+@pytest.mark.parametrize("name", sorted(EXPECTED_ERRORS))
+def test_bad_input_error_lines(name: str, tmp_path: Path) -> None:
+    source = tmp_path / name
+    shutil.copy(Path(__file__).parent / "data" / "bad" / name, source)
+    out = tmp_path / "g.usdc"
+    message = _assert_clean_failure(["dress", source, "-o", out], tmp_path, source, exit_code=1)
+    assert message == f"Error: {source}:/Char/Skel: {EXPECTED_ERRORS[name]}"
+    assert not out.exists()
 
 
 @pytest.mark.parametrize(
@@ -95,6 +124,8 @@ def test_bad_corpus_is_there() -> None:
         (["-o", "{dir}/g.usdc", "--skeleton", "/Nope"], "/Nope"),
         (["-o", "{dir}/g.usdc", "--root-layer", "{input}"], "overwrite the input"),
         (["-o", "{dir}/g.usdc", "--body-model", "{dir}/none.npz"], "none.npz"),
+        (["-o", "{dir}/g.usdc", "--betas", "0,9"], "betas given: betas[1] = 9 is outside"),
+        (["-o", "{dir}/g.usdc", "--betas", "-1e6"], "outside the body's shape space"),
     ],
 )
 def test_bad_arguments(body_layer: Path, tmp_path: Path, extra: list[str], expected: str) -> None:

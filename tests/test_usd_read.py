@@ -8,13 +8,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from pxr import Usd, UsdSkel
+from pxr import Sdf, Usd, UsdSkel
 from scipy.spatial.transform import Rotation
 
 from tests.rigs import RigStyle, write_rig
+from usd_garment.body.betas import MAX_ABS_BETA, as_betas
 from usd_garment.body.model import BodyModel
 from usd_garment.motion.sequence import SmplMotion
-from usd_garment.usd.body_layer import SKELETON_PATH, top_weights, write_body_layer
+from usd_garment.usd.body_layer import (
+    ANIMATION_PATH,
+    SKELETON_PATH,
+    top_weights,
+    write_body_layer,
+)
 from usd_garment.usd.errors import UsdInputError
 from usd_garment.usd.joint_aliases import match_smpl_joints
 from usd_garment.usd.read import find_skeletons, read_smpl_motion
@@ -236,3 +242,97 @@ def test_missing_file_and_bad_frames(tmp_path: Path, body_model: BodyModel) -> N
     write_body_layer(tmp_path / "b.usda", _motion(frames=3), body_model, with_mesh=False)
     with pytest.raises(UsdInputError, match=r"frames 2\.\.9"):
         read_smpl_motion(tmp_path / "b.usda", body_model, frames=(2, 9))
+
+
+def _static_layer(path: Path, motion: SmplMotion, body: BodyModel, with_range: bool) -> None:
+    """A one-frame body layer turned into a static pose: the animation's rotations and
+    translations as default values, no time samples; with or without the stage's time range."""
+    write_body_layer(path, motion, body, with_mesh=False)
+    layer = Sdf.Layer.FindOrOpen(str(path))
+    for name in ("rotations", "translations"):
+        spec = layer.GetAttributeAtPath(f"{ANIMATION_PATH}.{name}")
+        value = layer.QueryTimeSample(spec.path, 0.0)
+        for t in list(layer.ListTimeSamplesForPath(spec.path)):
+            layer.EraseTimeSample(spec.path, t)
+        spec.default = value
+    if with_range:
+        layer.startTimeCode, layer.endTimeCode = 0.0, 4.0
+    else:
+        layer.ClearStartTimeCode()
+        layer.ClearEndTimeCode()
+    layer.Save()
+
+
+@pytest.mark.parametrize("with_range", [False, True], ids=["no-range", "range"])
+def test_static_pose_reads(tmp_path: Path, body_model: BodyModel, with_range: bool) -> None:
+    """Default values without time samples are a static pose: every frame of the stage's range,
+    or one frame at time code 0 when the stage has none."""
+    motion = _motion(frames=1)
+    path = tmp_path / "static.usda"
+    _static_layer(path, motion, body_model, with_range)
+    back, info = read_smpl_motion(path, body_model)
+    frames = 5 if with_range else 1
+    assert back.num_frames == frames and back.time_codes.tolist() == list(range(frames))
+    assert (info.start_time_code, info.end_time_code) == (0.0, frames - 1.0)
+    assert _rotation_error(back.pose, np.repeat(motion.pose, frames, axis=0)) < 1e-5
+    np.testing.assert_allclose(back.trans, np.repeat(motion.trans, frames, axis=0), atol=1e-5)
+
+
+def _layer_with_motion(tmp_path: Path, body: BodyModel) -> tuple[Path, Sdf.Layer]:
+    path = tmp_path / "b.usda"
+    write_body_layer(path, _motion(frames=4), body, with_mesh=False)
+    return path, Sdf.Layer.FindOrOpen(str(path))
+
+
+def test_animation_without_translations(tmp_path: Path, body_model: BodyModel) -> None:
+    """Rotations but no translations: UsdSkel would pose the rest transforms."""
+    path, layer = _layer_with_motion(tmp_path, body_model)
+    layer.GetPrimAtPath(ANIMATION_PATH).RemoveProperty(
+        layer.GetAttributeAtPath(f"{ANIMATION_PATH}.translations")
+    )
+    layer.Save()
+    with pytest.raises(UsdInputError, match=r"no animation: .*/Animation has no translations"):
+        read_smpl_motion(path, body_model)
+
+
+def test_blocked_sample_and_wrong_count(tmp_path: Path, body_model: BodyModel) -> None:
+    path, layer = _layer_with_motion(tmp_path, body_model)
+    rotations = Sdf.Path(f"{ANIMATION_PATH}.rotations")
+    layer.SetTimeSample(rotations, 2.0, Sdf.ValueBlock())
+    layer.Save()
+    with pytest.raises(UsdInputError, match="has no rotations at time code 2"):
+        read_smpl_motion(path, body_model)
+    short = layer.QueryTimeSample(rotations, 1.0)[:20]
+    layer.SetTimeSample(rotations, 2.0, short)
+    layer.Save()
+    with pytest.raises(UsdInputError, match="has 20 rotations for its 24 joints at time code 2"):
+        read_smpl_motion(path, body_model)
+    back, _ = read_smpl_motion(path, body_model, frames=(0, 2))  # only the frames read count
+    assert back.num_frames == 2
+
+
+def test_wrong_count_names_the_first_bad_time(body_model: BodyModel) -> None:
+    for name in ("rotations", "translations", "scales"):
+        with pytest.raises(UsdInputError, match=rf"has 23 {name} for its 24 joints at time code 1"):
+            read_smpl_motion(BAD / f"wrong_count_{name}.usda", body_model)
+
+
+def test_betas_beyond_the_shape_space(tmp_path: Path, body_model: BodyModel) -> None:
+    with pytest.raises(UsdInputError, match=r"smpl:betas: betas\[0\] = 1e\+06 is outside"):
+        read_smpl_motion(BAD / "huge_betas.usda", body_model)
+    path = tmp_path / "b.usda"
+    write_body_layer(path, _motion(frames=2), body_model, with_mesh=False)
+    with pytest.raises(UsdInputError, match=r"betas given: betas\[1\] = -5\.5 is outside .* 5\)"):
+        read_smpl_motion(path, body_model, betas=np.array([0.0, -5.5]))
+    edge = np.array([MAX_ABS_BETA, -MAX_ABS_BETA] + [0.0] * 12 + [1e6, 0.0])  # 16: last 6 unused
+    back, _ = read_smpl_motion(path, body_model, betas=edge)
+    np.testing.assert_array_equal(back.betas, edge[:10])
+
+
+def test_as_betas_bound() -> None:
+    np.testing.assert_array_equal(as_betas([9.0]), [9.0] + [0.0] * 9)  # no bound by default
+    with pytest.raises(ValueError, match=r"betas\[2\] = 7 is outside"):
+        as_betas([0.0, 1.0, 7.0], max_abs=MAX_ABS_BETA)
+    with pytest.raises(ValueError, match="NaN"):
+        as_betas([np.nan], max_abs=MAX_ABS_BETA)
+    assert as_betas([], max_abs=MAX_ABS_BETA).shape == (10,)

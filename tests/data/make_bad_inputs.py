@@ -1,6 +1,6 @@
 """Rebuild the corpus of bad USD inputs in ``tests/data/bad/`` (from the repository root:
 ``python -m tests.data.make_bad_inputs``). Each file must make ``read_smpl_motion`` raise a
-one-line ``UsdInputError``."""
+one-line ``UsdInputError``, and ``usd-garment dress`` fail with one ``Error:`` line."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from pxr import Usd, UsdGeom, UsdSkel, Vt
 
 from tests.synthetic import TPOSE_JOINTS
 from usd_garment.body.joints import SMPL_PARENTS, smpl_joint_paths
+from usd_garment.usd.schema import apply_smpl_body
 
 BAD = Path(__file__).parent / "bad"
 JOINTS = smpl_joint_paths()
@@ -49,6 +50,20 @@ def _animation(stage: Usd.Stage, skel: UsdSkel.Skeleton, quats: np.ndarray, fram
     anim.CreateScalesAttr(Vt.Vec3hArray.FromNumpy(np.ones((len(joints), 3), np.float16)))
     binding = UsdSkel.BindingAPI.Apply(skel.GetPrim())
     binding.CreateAnimationSourceRel().SetTargets([anim.GetPath()])
+
+
+def _wrong_count(name: str) -> Usd.Stage:
+    """3 frames whose ``name`` attribute (rotations, translations or scales) holds one value
+    fewer than the animation's joints at time code 1."""
+    stage = _stage()
+    _animation(stage, _skeleton(stage, JOINTS, REST), np.tile([0.0, 0.0, 0.0, 1.0], (24, 1)), 3)
+    attr = stage.GetPrimAtPath("/Char/Skel/Anim").GetAttribute(name)
+    if name == "scales":  # authored as a default: sample all frames, one short
+        for f in range(3):
+            attr.Set(Vt.Vec3hArray.FromNumpy(np.ones((len(JOINTS) - (f == 1), 3), np.float16)), f)
+    else:
+        attr.Set(attr.Get(1)[:-1], 1)
+    return stage
 
 
 def _stage() -> Usd.Stage:
@@ -101,6 +116,22 @@ def main() -> None:
     stage.SetStartTimeCode(10)
     stage.SetEndTimeCode(2)
     stage.GetRootLayer().Export(str(BAD / "end_before_start.usda"))
+
+    for name in ("rotations", "translations", "scales"):
+        stage = _wrong_count(name)
+        stage.GetRootLayer().Export(str(BAD / f"wrong_count_{name}.usda"))
+
+    stage = _stage()
+    skel = _skeleton(stage, JOINTS, REST)
+    _animation(stage, skel, identity, 3)
+    apply_smpl_body(skel.GetPrim(), np.array([1e6] + [0.0] * 9), "neutral", "default")
+    stage.GetRootLayer().Export(str(BAD / "huge_betas.usda"))
+
+    stage = _stage()  # rotations and translations declared without samples or defaults
+    _animation(stage, _skeleton(stage, JOINTS, REST), identity, 0)
+    stage.SetStartTimeCode(0)
+    stage.SetEndTimeCode(0)
+    stage.GetRootLayer().Export(str(BAD / "no_animation_values.usda"))
 
 
 if __name__ == "__main__":

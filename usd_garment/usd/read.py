@@ -7,6 +7,13 @@ of the recovered motion, and gravity stays along −Y. Joint rotations come from
 transforms (joint skel-space transform × inverse bind transform), so the rig's joint
 orientations do not matter; the bind pose must be SMPL's rest pose (T-pose), in any placement
 and any axis-aligned orientation, which is read off the bind joint positions.
+
+What is read must be an animation UsdSkel can compose: a SkelAnimation whose rotations and
+translations have values (time samples, or default values for a static pose; scales are
+optional), each holding one value per joint of the animation at every time code read, and betas
+within the body's shape space (``|β| ≤`` :data:`~usd_garment.body.betas.MAX_ABS_BETA`).
+Anything else is a :class:`UsdInputError`, never a silent rest pose (UsdSkel itself only warns
+and falls back to the rest transforms).
 """
 
 from __future__ import annotations
@@ -21,7 +28,7 @@ import torch
 from pxr import Tf, Usd, UsdGeom, UsdSkel
 from scipy.spatial.transform import Rotation
 
-from usd_garment.body.betas import as_betas
+from usd_garment.body.betas import MAX_ABS_BETA, as_betas
 from usd_garment.body.joints import NUM_BETAS, NUM_JOINTS, SMPL_JOINT_NAMES, SMPL_PARENTS
 from usd_garment.body.model import BodyModel
 from usd_garment.motion.sequence import SmplMotion
@@ -87,14 +94,17 @@ def read_smpl_motion(
 
     Frames are the integer time codes from the stage's start to end time code (the animation's
     sample range when the stage has none), values interpolated as USD does between sparse
-    samples.
+    samples. A static pose, a SkelAnimation whose rotations and translations have default
+    values but no time samples, is read at every frame of the stage's range, or as one frame at
+    time code 0 when the stage has no range.
 
     Args:
         path: a ``.usd``/``.usda``/``.usdc``/``.usdz`` file.
         body: the body model whose rest pelvis defines SMPL's ``trans``.
         skeleton: prim path of the Skeleton; needed only when the stage has several.
         frames: ``(a, b)`` reads frames ``a .. b-1`` of that range.
-        betas: ``(≤16,)`` shape coefficients overriding the skeleton's ``smpl:betas``.
+        betas: ``(≤16,)`` shape coefficients overriding the skeleton's ``smpl:betas``; like
+            those, the first 10 must be finite and within ``±MAX_ABS_BETA``.
 
     Returns:
         The motion (pose ``(T, 24, 3)`` rad, trans ``(T, 3)`` m, canonical frame, float32) and
@@ -102,7 +112,10 @@ def read_smpl_motion(
 
     Raises:
         UsdInputError: unreadable file, no (or no such) animated skeleton, missing SMPL joints,
-            non-finite transforms, an empty time range or bad ``frames``.
+            no animation (rotations or translations without any value), rotations, translations
+            or scales holding a different count than the animation's joints, non-finite
+            transforms, betas that are not finite or beyond ``MAX_ABS_BETA``, an empty time
+            range or bad ``frames``.
     """
     path = Path(path)
     stage = open_stage(path)
@@ -120,7 +133,10 @@ def read_smpl_motion(
     up_axis, meters_per_unit = stage_units(stage)
     to_world = canonical_to_world_matrix(up_axis, meters_per_unit)
     world_to_canon = np.linalg.inv(to_world)
-    start, end = _time_range(stage, anim, where)
+    animation = UsdSkel.Animation(anim.GetPrim())
+    if animation:
+        _require_values(animation, where)
+    start, end = _time_range(stage, anim, where, static_ok=bool(animation))
     codes = np.arange(math.ceil(start), math.floor(end) + 1, dtype=np.float64)
     if codes.size == 0:
         raise UsdInputError(f"{where}: no integer time code between {start} and {end}")
@@ -129,6 +145,8 @@ def read_smpl_motion(
         if not 0 <= a < b <= codes.size:
             raise UsdInputError(f"{where}: frames {a}..{b} outside the {codes.size} frames read")
         codes = codes[a:b]
+    if animation:
+        _check_counts(animation, codes, where)
 
     bind = _bind_transforms(skel, len(joint_paths), where)
     rest_axes = _rest_axes(bind[:, 3, :3], rig_index, where)
@@ -216,15 +234,71 @@ def _pick_skeleton(stage: Usd.Stage, skeleton: str | None, path: Path) -> UsdSke
     raise UsdInputError(f"{path}: no UsdSkel Skeleton in the stage")
 
 
-def _time_range(stage: Usd.Stage, anim: UsdSkel.AnimQuery, where: str) -> tuple[float, float]:
-    """The stage's start/end time codes, else the animation's first/last sample."""
+def _require_values(animation: UsdSkel.Animation, where: str) -> None:
+    """Raise unless the SkelAnimation animates joints: it lists joints, and its rotations and
+    translations have values (time samples or a default). UsdSkel composes no joint transform
+    from an animation without both and silently poses the rest transforms instead."""
+    label = f"the SkelAnimation {animation.GetPath()}"
+    if not animation.GetJointsAttr().Get():
+        raise UsdInputError(f"{where}: no animation: {label} lists no joints")
+    missing = [
+        name
+        for name, attr in (
+            ("rotations", animation.GetRotationsAttr()),
+            ("translations", animation.GetTranslationsAttr()),
+        )
+        if not attr.HasValue()
+    ]
+    if len(missing) == 2:
+        raise UsdInputError(
+            f"{where}: no animation: {label} has no time samples and no default values on its "
+            "rotations and translations"
+        )
+    if missing:
+        raise UsdInputError(
+            f"{where}: no animation: {label} has no {missing[0]} (no time samples, no default "
+            "value), UsdSkel would pose the rest transforms"
+        )
+
+
+def _check_counts(animation: UsdSkel.Animation, codes: np.ndarray, where: str) -> None:
+    """Raise at the first time code of ``codes`` ``(T,)`` where the SkelAnimation's rotations,
+    translations or (optional) scales do not hold one value per joint of the animation, or where
+    rotations or translations are blocked."""
+    label = f"the SkelAnimation {animation.GetPath()}"
+    joints = len(animation.GetJointsAttr().Get())
+    attrs = (
+        ("rotations", animation.GetRotationsAttr(), True),
+        ("translations", animation.GetTranslationsAttr(), True),
+        ("scales", animation.GetScalesAttr(), False),
+    )
+    for code in codes:
+        time = Usd.TimeCode(float(code))
+        for name, attr, required in attrs:
+            value = attr.Get(time)
+            if value is None:
+                if required:
+                    raise UsdInputError(f"{where}: {label} has no {name} at time code {code:g}")
+                continue
+            if len(value) != joints:
+                raise UsdInputError(
+                    f"{where}: {label} has {len(value)} {name} for its {joints} joints at time "
+                    f"code {code:g}"
+                )
+
+
+def _time_range(
+    stage: Usd.Stage, anim: UsdSkel.AnimQuery, where: str, static_ok: bool = False
+) -> tuple[float, float]:
+    """The stage's start/end time codes, else the animation's first/last sample, else (0, 0)
+    for a static pose when ``static_ok`` (a SkelAnimation already known to have values)."""
     if stage.HasAuthoredTimeCodeRange():
         start, end = float(stage.GetStartTimeCode()), float(stage.GetEndTimeCode())
     else:
         samples = list(anim.GetJointTransformTimeSamples())
-        if not samples:
+        if not samples and not static_ok:
             raise UsdInputError(f"{where}: the SkelAnimation has no time samples")
-        start, end = float(samples[0]), float(samples[-1])
+        start, end = (float(samples[0]), float(samples[-1])) if samples else (0.0, 0.0)
     if end < start:
         raise UsdInputError(f"{where}: end time code {end} is before start time code {start}")
     return start, end
@@ -300,14 +374,22 @@ def _betas(
     override: np.ndarray | None, prim: Usd.Prim, skel_root: Usd.Prim, where: str
 ) -> np.ndarray:
     """``(10,)`` float64 betas: the override, the skeleton's (or SkelRoot's) ``smpl:betas``, or
-    zeros with a warning. Longer vectors are cut to 10, shorter ones padded with zeros."""
-    values = override if override is not None else read_betas(prim)
+    zeros with a warning. Longer vectors are cut to 10, shorter ones padded with zeros.
+
+    Raises:
+        UsdInputError: a kept value that is not finite or beyond ``±MAX_ABS_BETA``.
+    """
+    origin = "betas given"
+    values = override
     if values is None:
-        values = read_betas(skel_root)
+        origin = "smpl:betas"
+        values = read_betas(prim)
+        if values is None:
+            values = read_betas(skel_root)
     if values is None:
         warnings.warn(f"{where}: no smpl:betas on the Skeleton, using zeros", stacklevel=3)
         values = np.zeros(NUM_BETAS)
     try:
-        return as_betas(values)
+        return as_betas(values, max_abs=MAX_ABS_BETA)
     except ValueError as exc:
-        raise UsdInputError(f"{where}: {exc}") from None
+        raise UsdInputError(f"{where}: {origin}: {exc}") from None
