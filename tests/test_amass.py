@@ -137,3 +137,16 @@ def test_bad_amass_files(tmp_path: Path, body_model: BodyModel) -> None:
     )
     assert result.exit_code != 0 and "Traceback" not in result.output
     assert not (tmp_path / "x.usda").exists()
+
+
+def test_import_refuses_betas_beyond_the_shape_space(tmp_path: Path) -> None:
+    """An AMASS file whose betas the reader would refuse gives one error line and no layer."""
+    data = _amass_npz(tmp_path / "a.npz", frames=3)
+    data["betas"][4] = 12.0
+    np.savez(tmp_path / "a.npz", **data)
+    out = tmp_path / "a.usda"
+    result = CliRunner().invoke(main, ["import-amass", str(tmp_path / "a.npz"), "-o", str(out)])
+    assert result.exit_code == 1 and not out.exists()
+    assert result.stderr.strip() == (
+        f"Error: {out}: betas[4] = 12 is outside the body's shape space (|beta| <= 5)"
+    )

@@ -9,10 +9,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from click.testing import CliRunner
 from pxr import Usd, UsdGeom, UsdSkel
 
 from tests.test_amass import _amass_npz
 from usd_garment.body.model import BodyModel
+from usd_garment.cli.main import main
 from usd_garment.motion.amass import load_amass
 from usd_garment.motion.procedural import make_motion
 from usd_garment.motion.sequence import SmplMotion
@@ -121,3 +123,22 @@ def test_all_weights_pads_with_zero() -> None:
     np.testing.assert_array_equal(idx[2], [3, 2, 1, 0])
     idx, w = all_weights(np.eye(3))
     assert idx.shape == (3, 1) and idx[:, 0].tolist() == [0, 1, 2]
+
+
+def test_betas_beyond_the_shape_space_are_not_written(
+    tmp_path: Path, body_model: BodyModel
+) -> None:
+    """The writer refuses betas the reader would refuse, so every layer it writes reads back."""
+    motion = make_motion("squat", 2, body=body_model)
+    motion.betas[3] = -6.0
+    path = tmp_path / "body.usda"
+    with pytest.raises(ValueError, match=r"body\.usda: betas\[3\] = -6 is outside"):
+        write_body_layer(path, motion, body_model)
+    assert not path.exists()
+    result = CliRunner().invoke(
+        main, ["motion", "make", "squat", "-o", str(path), "--frames", "2", "--betas", "0,0,6"]
+    )
+    assert result.exit_code == 1 and not path.exists()
+    assert result.stderr.strip() == (
+        f"Error: {path}: betas[2] = 6 is outside the body's shape space (|beta| <= 5)"
+    )

@@ -23,6 +23,7 @@ from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt
 from scipy.spatial.transform import Rotation
 
 from usd_garment.atomic import atomic_output
+from usd_garment.body.betas import MAX_ABS_BETA, as_betas
 from usd_garment.body.joints import NUM_JOINTS, SMPL_PARENTS, smpl_joint_paths
 from usd_garment.body.model import BodyModel
 from usd_garment.motion.sequence import SmplMotion
@@ -91,7 +92,16 @@ def write_body_layer(
             ``motion.time_codes``.
         body: the body model the betas belong to; gives rest joints, mesh and weights.
         with_mesh: also write the skinned body mesh (skip it for a skeleton-only layer).
+
+    Raises:
+        ValueError: betas that are not finite or beyond ``±MAX_ABS_BETA`` (the reader refuses
+            them, so no layer is written that could not be read back).
+        OSError: the file could not be written.
     """
+    try:
+        as_betas(motion.betas, max_abs=MAX_ABS_BETA)
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None
     with torch.no_grad():
         rest_vertices, rest_joints = body.shaped(torch.as_tensor(motion.betas)[None].float())
     rest_joints_np = rest_joints[0].double().numpy()
