@@ -17,6 +17,14 @@ from usd_garment.garment.template import GARMENT_NAMES
 from usd_garment.sim.material import ClothMaterial
 
 
+def _capture(text: str) -> tuple[str, str]:
+    """``FILE:SPLIT`` of ``--capture`` as ``(file, split)``."""
+    path, sep, split = text.rpartition(":")
+    if not sep or not path:
+        raise click.BadParameter(f"expected FILE:SPLIT, got {text!r}", param_hint="--capture")
+    return path, split
+
+
 @click.group()
 def dataset() -> None:
     """Training data: simulated garment sequences."""
@@ -35,6 +43,27 @@ def dataset() -> None:
     default=1.0,
     show_default=True,
     help="Body shapes: betas standard normal, clipped to ±sigma.",
+)
+@click.option(
+    "--open-shoulders",
+    is_flag=True,
+    help="Procedural motions keep the arms clear of the torso (default: arms may hang "
+    "against the trunk, as in capture).",
+)
+@click.option(
+    "--capture",
+    "captures",
+    multiple=True,
+    metavar="FILE:SPLIT",
+    help="A real motion (.bvh, or a USD body layer) and its split (train, validation or "
+    "test), played whole; repeat for several.",
+)
+@click.option(
+    "--capture-shapes",
+    type=click.IntRange(1),
+    default=1,
+    show_default=True,
+    help="How many of the body shapes each capture is simulated on (the first ones).",
 )
 @solver_options
 @workers_option
@@ -55,6 +84,9 @@ def make(
     lod: str,
     seed: int,
     shape_sigma: float,
+    open_shoulders: bool,
+    captures: tuple[str, ...],
+    capture_shapes: int,
     substeps: int,
     iterations: int,
     material: Path | None,
@@ -63,7 +95,8 @@ def make(
     output: Path,
     as_json: bool,
 ) -> None:
-    """Simulate GARMENT on MOTIONS procedural motions × SHAPES body shapes into OUTPUT."""
+    """Simulate GARMENT on MOTIONS procedural motions × SHAPES body shapes, and on the
+    captures, into OUTPUT."""
     bar: tqdm | None = None
 
     def on_sequence(entry: dict[str, Any], done: int, total: int) -> None:
@@ -78,8 +111,11 @@ def make(
         with user_errors():
             fabric = ClothMaterial.load(material) if material is not None else ClothMaterial()
             config = DatasetConfig(
-                garment, lod, motions, shapes, frames, 30.0, seed, substeps, iterations, fabric,
-                shape_sigma,
+                garment=garment, lod=lod, motions=motions, shapes=shapes, frames=frames,
+                seed=seed, substeps=substeps, iterations=iterations, material=fabric,
+                shape_sigma=shape_sigma, open_shoulders=open_shoulders,
+                captures=tuple(_capture(text) for text in captures),
+                capture_shapes=capture_shapes,
             )  # fmt: skip
             manifest = make_dataset(
                 output, config, workers=workers, resume=resume, on_sequence=on_sequence

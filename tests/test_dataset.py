@@ -11,6 +11,7 @@ import pytest
 from click.testing import CliRunner
 
 from usd_garment import dataset as dataset_module
+from usd_garment.body.model import BodyModel
 from usd_garment.cli.main import main
 from usd_garment.dataset import (
     MANIFEST_NAME,
@@ -20,6 +21,8 @@ from usd_garment.dataset import (
     read_manifest,
 )
 from usd_garment.methods.simulation import SimulationError
+from usd_garment.motion.procedural import make_motion
+from usd_garment.usd.body_layer import write_body_layer
 from usd_garment.usd.garment_read import read_garment_layer
 
 pytest.importorskip("newton")
@@ -107,3 +110,39 @@ def test_two_workers(tmp_path: Path) -> None:
     assert sorted(seen) == ["m00_s0", "m01_s0"]
     assert manifest["summary"]["ok"] == 2 and manifest["summary"]["frames_ok"] == 10
     assert np.isfinite(manifest["summary"]["bytes"])
+
+
+def test_captures_join_the_plan_with_their_splits(tmp_path: Path) -> None:
+    capture = tmp_path / "walk.usda"
+    capture.write_text("#usda 1.0\n")  # only its existence matters to the plan
+    config = DatasetConfig(
+        motions=3, shapes=2, seed=1, captures=((str(capture), "test"),), capture_shapes=2
+    )
+    specs = plan_sequences(config)
+    captured = [s for s in specs if s.capture]
+    assert [s.name for s in captured] == ["c00_s0", "c00_s1"]
+    assert {s.split for s in captured} == {"test"} and {s.motion_index for s in captured} == {3}
+    assert [s.betas for s in captured] == [s.betas for s in specs[:2]]  # the same shapes
+    with pytest.raises(ValueError, match="unknown split"):
+        DatasetConfig(captures=((str(capture), "holdout"),))
+    with pytest.raises(FileNotFoundError, match="no such capture"):
+        DatasetConfig(captures=((str(tmp_path / "none.bvh"), "train"),))
+
+
+def test_a_captured_body_layer_is_simulated_whole(tmp_path: Path, body_model: BodyModel) -> None:
+    capture = tmp_path / "capture.usda"
+    write_body_layer(capture, make_motion("walk", 8, 60.0, seed=2, body=body_model), body_model)
+    out = tmp_path / "data"
+    code, output = _run(["dataset", "make", "--motions", "1", "--shapes", "1", "--frames", "2",
+                         "--lod", "low", "--workers", "1", "--capture", f"{capture}:validation",
+                         "-o", out])  # fmt: skip
+    assert code == 0, output
+    entries = {e["name"]: e for e in read_manifest(out)["sequences"]}
+    assert sorted(entries) == ["c00_s0", "m00_s0"]
+    entry = entries["c00_s0"]
+    assert entry["status"] == "ok" and entry["split"] == "validation"
+    assert entry["frames"] == 4  # 8 frames at 60 fps, played whole at 30 fps
+    points = read_garment_layer(out / entry["files"]["garment"])[0]
+    assert points.shape[0] == 4
+    code, output = _run(["dataset", "make", "--capture", capture, "-o", tmp_path / "x"])
+    assert code != 0 and "FILE:SPLIT" in output

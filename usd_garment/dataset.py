@@ -1,12 +1,15 @@
-"""Training data: a garment simulated on seeded procedural motions × random body shapes, one SMPL
-body layer and one simulated garment layer per (motion, shape) pair, listed in a JSON manifest.
+"""Training data: a garment simulated on seeded procedural motions and real captures × random body
+shapes, one SMPL body layer and one simulated garment layer per (motion, shape) pair, listed in a
+JSON manifest.
 
-Motions rotate through ``MOTION_KINDS`` in a seeded order, each with its own seed; shape 0 is the
-mean body (β = 0), the others come from ``random_betas``. The split into train / validation /
-test is by motion, so test motions are never seen in training. Sequences run one per worker
-process (Warp runs CPU kernels on one thread); the manifest is rewritten after each one, so an
-interrupted run resumes where it stopped. A sequence that fails its simulation checks is marked
-"bad" and its files are removed.
+Motions rotate through ``MOTION_KINDS`` in a seeded order, each with its own seed, arms free to
+hang against the trunk unless ``open_shoulders``; captures (BVH files, or USD body layers such as
+``import-amass`` writes) follow, each played whole at the dataset's frame rate with the split it
+was given. Shape 0 is the mean body (β = 0), the others come from ``random_betas``. The split
+into train / validation / test is by motion, so test motions are never seen in training.
+Sequences run one per worker process (Warp runs CPU kernels on one thread); the manifest is
+rewritten after each one, so an interrupted run resumes where it stopped. A sequence that fails
+its simulation checks is marked "bad" and its files are removed.
 """
 
 from __future__ import annotations
@@ -24,16 +27,20 @@ import numpy as np
 from usd_garment.atomic import atomic_output
 from usd_garment.body.io import load_body_model
 from usd_garment.body.joints import NUM_BETAS
+from usd_garment.body.model import BodyModel
 from usd_garment.dress import dress
 from usd_garment.garment.library import load_template
 from usd_garment.garment.template import GARMENT_NAMES, LODS
 from usd_garment.methods.simulation import SimulationError, SimulationMethod
 from usd_garment.motion.procedural import MOTION_KINDS, make_motion, random_betas
+from usd_garment.motion.resample import resample_motion
+from usd_garment.motion.sequence import SmplMotion
 from usd_garment.sim.cloth import ITERATIONS, SUBSTEPS
 from usd_garment.sim.material import ClothMaterial
 from usd_garment.usd.body_layer import write_body_layer
 from usd_garment.usd.errors import UsdInputError
 from usd_garment.usd.garment_read import read_garment_layer
+from usd_garment.usd.read import read_smpl_motion
 
 MANIFEST_NAME = "manifest.json"
 MANIFEST_FORMAT = 1
@@ -56,8 +63,12 @@ class DatasetConfig:
         seed: seed of the motion kinds and seeds, the shapes and the split.
         substeps, iterations: solver steps per frame and iterations per step.
         material: the fabric.
-        shape_sigma: ``random_betas``'s clip (±σ). With σ = 2, heavy bodies (β2 ≈ 2) with
-            hanging arms pinch the garment between arm and torso and fail the inside check.
+        shape_sigma: ``random_betas``'s clip (±σ).
+        open_shoulders: procedural motions open the shoulders to keep the arms clear of the
+            torso (off: arms hang against the trunk as in capture).
+        captures: real motions, ``(path, split)`` pairs: a ``.bvh`` file or a USD body layer,
+            simulated on the first ``capture_shapes`` shapes, whole, resampled to ``fps``.
+        capture_shapes: how many of the shapes each capture is simulated on.
     """
 
     garment: str = "tshirt"
@@ -71,6 +82,9 @@ class DatasetConfig:
     iterations: int = ITERATIONS
     material: ClothMaterial = field(default_factory=ClothMaterial)
     shape_sigma: float = 1.0
+    open_shoulders: bool = False
+    captures: tuple[tuple[str, str], ...] = ()
+    capture_shapes: int = 1
 
     def __post_init__(self) -> None:
         if self.garment not in GARMENT_NAMES:
@@ -81,10 +95,18 @@ class DatasetConfig:
             raise ValueError("motions, shapes and frames must be >= 1 and fps > 0")
         if not self.shape_sigma > 0:
             raise ValueError("shape_sigma must be > 0")
+        if not 1 <= self.capture_shapes <= self.shapes:
+            raise ValueError(f"capture_shapes must be in [1, {self.shapes}]")
+        for path, split in self.captures:
+            if split not in SPLITS:
+                raise ValueError(f"{path}: unknown split '{split}' ({', '.join(SPLITS)})")
+            if not Path(path).is_file():
+                raise FileNotFoundError(f"{path}: no such capture file")
 
     def to_json(self) -> dict[str, Any]:
         values = asdict(self)
         values["material"] = self.material.to_dict()
+        values["captures"] = [list(c) for c in self.captures]
         return values
 
     def method(self) -> SimulationMethod:
@@ -97,10 +119,13 @@ class SequenceSpec:
     """One (motion, shape) pair of a dataset.
 
     Attributes:
-        name: e.g. ``m03_s1``; the files are ``{name}_body.usdc`` and ``{name}_{garment}.usdc``.
-        motion_index, motion_kind, motion_seed: the motion and its ``make_motion`` arguments.
+        name: e.g. ``m03_s1`` (``c00_s0`` for a capture); the files are ``{name}_body.usdc``
+            and ``{name}_{garment}.usdc``.
+        motion_index, motion_kind, motion_seed: the motion and its ``make_motion`` arguments
+            (kind "capture" and seed 0 for a capture).
         shape_index, betas: the body shape (``(10,)`` list).
         split: "train", "validation" or "test" (by motion).
+        capture: the capture file, empty for a procedural motion.
     """
 
     name: str
@@ -110,6 +135,7 @@ class SequenceSpec:
     shape_index: int
     betas: list[float]
     split: str
+    capture: str = ""
 
 
 def body_file(spec: SequenceSpec) -> str:
@@ -160,7 +186,42 @@ def plan_sequences(config: DatasetConfig) -> list[SequenceSpec]:
                     split=splits[i],
                 )
             )
+    for k, (path, split) in enumerate(config.captures):
+        for j, betas in enumerate(shapes[: config.capture_shapes]):
+            specs.append(
+                SequenceSpec(
+                    name=f"c{k:02d}_s{j}",
+                    motion_index=config.motions + k,
+                    motion_kind="capture",
+                    motion_seed=0,
+                    shape_index=j,
+                    betas=[round(float(b), 6) for b in betas],
+                    split=split,
+                    capture=path,
+                )
+            )
     return specs
+
+
+def sequence_motion(config: DatasetConfig, spec: SequenceSpec, body: BodyModel) -> SmplMotion:
+    """The body motion of ``spec``: the procedural motion, or the capture played whole at the
+    dataset's frame rate on the spec's body shape, time codes from 0."""
+    betas = np.asarray(spec.betas, dtype=np.float32)
+    if not spec.capture:
+        return make_motion(
+            spec.motion_kind, config.frames, config.fps, spec.motion_seed, betas, body,
+            config.open_shoulders,
+        )  # fmt: skip
+    if Path(spec.capture).suffix.lower() == ".bvh":
+        from usd_garment.motion.bvh import bvh_motion
+
+        motion = bvh_motion(spec.capture, body, betas)
+    else:
+        motion, _ = read_smpl_motion(spec.capture, body)
+        motion.betas = betas
+    motion = resample_motion(motion, config.fps)
+    motion.time_codes = np.arange(motion.num_frames, dtype=np.float64)
+    return motion
 
 
 def run_sequence(folder: str, config: DatasetConfig, spec: SequenceSpec) -> dict[str, Any]:
@@ -172,14 +233,11 @@ def run_sequence(folder: str, config: DatasetConfig, spec: SequenceSpec) -> dict
     started = time.perf_counter()
     out = Path(folder)
     body = load_body_model(None)
-    motion = make_motion(
-        spec.motion_kind, config.frames, config.fps, spec.motion_seed,
-        np.asarray(spec.betas, dtype=np.float32), body,
-    )  # fmt: skip
+    motion = sequence_motion(config, spec, body)
     body_path, garment_path = out / body_file(spec), out / garment_file(spec, config.garment)
     write_body_layer(body_path, motion, body)
     method = config.method()
-    entry: dict[str, Any] = {**asdict(spec), "frames": config.frames}
+    entry: dict[str, Any] = {**asdict(spec), "frames": motion.num_frames}
     try:
         dress(body_path, garment_path, garment=config.garment, method=method, lod=config.lod)
     except SimulationError as exc:
@@ -229,7 +287,7 @@ def sequence_is_done(folder: Path, config: DatasetConfig, entry: dict[str, Any] 
     except UsdInputError:
         return False
     vertices = len(load_template(config.garment, config.lod).vertices)
-    return points.shape[:2] == (config.frames, vertices)
+    return points.shape[:2] == (entry.get("frames"), vertices)
 
 
 def read_manifest(folder: str | Path) -> dict[str, Any]:
