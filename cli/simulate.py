@@ -22,6 +22,7 @@ from usd_garment.cli.options import (
 from usd_garment.dress import dress as dress_stage
 from usd_garment.garment.template import GARMENT_NAMES
 from usd_garment.methods.simulation import SimulationMethod
+from usd_garment.sim.cloth import MAX_BAD_RUN, MAX_SUBSTEPS
 from usd_garment.sim.material import ClothMaterial
 
 
@@ -40,6 +41,13 @@ from usd_garment.sim.material import ClothMaterial
 @frames_option
 @body_model_option
 @skeleton_option
+@click.option(
+    "--strict",
+    is_flag=True,
+    help="Fail at the first frame that fails its checks with the most substeps (default: keep "
+    "it, flagged in the per-frame quality; NaN, a garment that fell off or more than "
+    f"{MAX_BAD_RUN} bad frames in a row fail anyway).",
+)
 @json_option()
 def simulate(
     input_path: Path,
@@ -52,13 +60,16 @@ def simulate(
     frames: str | None,
     body_model: Path | None,
     skeleton: str | None,
+    strict: bool,
     as_json: bool,
 ) -> None:
     """Simulate a garment on the animated SMPL body of BODY; write the garment layer."""
     frame_range = parse_frames(frames)
     with FrameProgress("simulation") as bar, user_errors():
         fabric = ClothMaterial.load(material) if material is not None else None
-        method = SimulationMethod(substeps, iterations, fabric, max_substeps=max(16, substeps))
+        method = SimulationMethod(
+            substeps, iterations, fabric, max_substeps=max(MAX_SUBSTEPS, substeps), strict=strict
+        )
         result = dress_stage(
             input_path,
             output,
@@ -79,9 +90,12 @@ def simulate(
     click.echo(
         f"{result.garment} (simulation): {result.frames} frames × {result.vertices} vertices in "
         f"{sum(s.values()):.1f} s ({settings['seconds_per_frame']:.2f} s/frame simulated); "
-        f"inside the body mean {100 * settings['inside_share_mean']:.3f}%, max distance "
+        f"inside the body where the pose forces it mean "
+        f"{100 * settings['inside_forced_share_mean']:.3f}%, elsewhere mean "
+        f"{100 * settings['inside_elsewhere_share_mean']:.3f}% (max "
+        f"{100 * settings['inside_elsewhere_share_max']:.3f}%), max distance "
         f"{settings['max_distance_m']:.3f} m, stretch p99 max {settings['stretch_p99_max']:.3f}, "
-        f"{len(settings['retries'])} frames retried"
+        f"{len(settings['retries'])} frames retried, {settings['bad_frames']} bad frames kept"
     )
     for path in result.outputs:
         click.echo(f"wrote {path}")

@@ -1,5 +1,7 @@
 """Tests of the training-data cloth simulator (``usd_garment.sim``): material mapping, panel
-layout, frame checks, and short Newton runs of a cloth tube on a moving capsule."""
+layout, frame checks (winding-number inside test, forced contact), short Newton runs of a cloth
+tube on a moving capsule (bad frames kept, strict, long bad runs), and the lead-in of the
+simulation method for strong body shapes."""
 
 from __future__ import annotations
 
@@ -10,7 +12,14 @@ import numpy as np
 import pytest
 import trimesh
 
-from usd_garment.sim.checks import CheckLimits, check_frame, unique_edges
+from usd_garment.eval.body_distance import BodySurface
+from usd_garment.sim.checks import (
+    CheckLimits,
+    check_frame,
+    frame_body_distance,
+    measure_frame,
+    unique_edges,
+)
 from usd_garment.sim.cloth import GarmentSimulator, SimResult, panel_layout, simulate_sequence
 from usd_garment.sim.material import ClothMaterial
 
@@ -131,14 +140,40 @@ def test_checks_flag_inside_far_stretch_and_nan() -> None:
 
 
 def test_simulator_body_distance_matches_reference() -> None:
-    """The Warp query on the collider agrees with trimesh's exact signed distance."""
-    body = capsule()
+    """The simulator's query (the shared winding-number one, closest point among the nearest
+    triangles by centroid: exact on evenly sized triangles) agrees with trimesh's exact signed
+    distance on a closed sphere."""
+    body = trimesh.creation.icosphere(subdivisions=3, radius=0.1)
     vertices, faces = tube(0.075, 0.4, 12, 7)
     sim = GarmentSimulator(vertices, faces, body.faces, body.vertices)
     points = np.random.default_rng(0).uniform(-0.2, 0.2, vertices.shape)
     sim.state_0.particle_q.assign(points.astype(np.float32))
     reference = -trimesh.proximity.signed_distance(body, points)
     np.testing.assert_allclose(sim.body_distance(), reference, atol=1e-5)
+
+
+def test_forced_contact_is_not_a_failure() -> None:
+    """Cloth on an arm pressed into the trunk lies inside the body, forced by the pose: the
+    frame passes; the same share inside elsewhere fails it."""
+    trunk = trimesh.creation.capsule(height=0.4, radius=0.12, count=[24, 24])  # along Z
+    arm = capsule()  # along X, radius 6 cm
+    arm.apply_translation([0.25, 0.0, 0.0])  # its cylinder from the trunk's axis outwards
+    body = trimesh.util.concatenate([trunk, arm])
+    surface = BodySurface(body.faces, len(body.vertices))
+    sleeve, faces = tube(0.062, 0.4, 16, 9)  # 2 mm off the arm; rings 5 cm apart
+    sleeve = sleeve + np.array([0.24, 0.0, 0.0])  # rings at x = 4 and 9 cm inside the trunk
+    edges = unique_edges(faces)
+    rest = np.linalg.norm(sleeve[edges[:, 0]] - sleeve[edges[:, 1]], axis=1)
+    limits = CheckLimits()
+    check = measure_frame(sleeve, body.vertices, surface, rest, edges, limits)
+    assert check.inside_share > 0.05  # the first ring(s) of the sleeve are inside the trunk
+    assert check.inside_forced_share == pytest.approx(check.inside_share)
+    assert check.inside_elsewhere_share == 0.0 and check.failures(limits) == []
+    distance, forced = frame_body_distance(sleeve, body.vertices, surface)
+    assert (forced == (distance < 0)).all()
+    unforced = check_frame(sleeve, distance, rest, edges, limits)  # no forced flags
+    assert unforced.inside_elsewhere_share == check.inside_share
+    assert "inside the body" in " ".join(unforced.failures(limits))
 
 
 def run_tube(frames: int, speed: float, around: int, along: int, **kwargs: Any) -> SimResult:
@@ -175,8 +210,24 @@ def test_teleporting_body_fails_instead_of_returning_garbage() -> None:
     result = simulate_sequence(
         vertices, faces, body.faces, motion, lead_in=0, settle_frames=1, max_substeps=8
     )
-    assert not result.ok and "motion frame 1" in result.message
-    assert result.points.shape[0] == 1 and result.substeps[-1] == 8
+    assert not result.ok and "motion frame 1" in result.message and "fell off" in result.message
+    assert result.points.shape[0] == 1 and result.substeps[-1] == 8 and result.bad == [0, 1]
+
+
+def test_bad_frames_are_kept_unless_strict() -> None:
+    """With a stretch limit no frame meets, frames are kept and flagged; ``strict`` stops at the
+    first; more than ``max_bad_run`` in a row fail with a clear message."""
+    tight = CheckLimits(max_stretch=1.0)
+    kwargs: dict[str, Any] = dict(lead_in=1, settle_frames=1, max_substeps=4, limits=tight)
+    kept = run_tube(frames=3, speed=1.0, around=12, along=7, max_bad_run=100, **kwargs)
+    assert kept.ok and kept.points.shape[0] == 3 and np.isfinite(kept.points).all()
+    assert kept.bad == [True] * 3 and kept.lead_in_bad == [True] * 2 and kept.bad_frames == 5
+    strict = run_tube(frames=3, speed=1.0, around=12, along=7, strict=True, **kwargs)
+    assert not strict.ok and strict.message.startswith("lead-in frame 0: edge stretch p99")
+    assert strict.points.shape[0] == 0
+    run = run_tube(frames=3, speed=1.0, around=12, along=7, max_bad_run=3, **kwargs)
+    assert not run.ok and run.points.shape[0] == 1
+    assert run.message.startswith("motion frame 1: 4 bad frames in a row, the last with edge")
 
 
 @pytest.mark.slow
@@ -184,3 +235,30 @@ def test_denser_tube_fast_motion() -> None:
     """1200 vertices, 3 s of a swing reaching ~1.6 m/s: whipping soft cotton stretches it."""
     result = run_tube(frames=90, speed=2.5, around=48, along=25)
     assert_good(result, 90, max_stretch=1.2)
+
+
+@pytest.mark.parametrize(
+    "betas",
+    [[2.0], [-2.0], list(np.random.default_rng(3).normal(size=4))],
+    ids=["beta1=+2", "beta1=-2", "beta1..4~N(0,1)"],
+)
+def test_lead_in_matches_the_graded_rest_shape(betas: list[float]) -> None:
+    """A strong body shape does not break the first frame: the start (the draped template
+    graded like the rest shape, on the shaped T-pose body) has the graded rest lengths, up to
+    the drape's own sag (T-shirt low: rest-length error p99 4.5 %)."""
+    from usd_garment.body.io import load_body_model
+    from usd_garment.garment.library import load_template
+    from usd_garment.methods.simulation import SimulationMethod
+    from usd_garment.motion.sequence import SmplMotion
+
+    shape = np.zeros(10, np.float32)
+    shape[: len(betas)] = betas
+    pose = np.zeros((1, 24, 3), np.float32)
+    pose[:, 16, 2], pose[:, 17, 2] = -0.3, 0.3
+    motion = SmplMotion(shape, pose, np.zeros((1, 3), np.float32), 30.0)
+    method = SimulationMethod(lead_in=2, settle=0, max_substeps=4)
+    method.predict(motion, load_body_model(None), load_template("tshirt", "low"))
+    assert method.result is not None and method.result.ok
+    first = method.result.lead_in_checks[0]
+    assert first.stretch_p99 < 1.06 and first.inside_elsewhere_share < 0.002
+    assert method.settings["lead_in_stretch_p99_first"] == pytest.approx(first.stretch_p99)

@@ -1,6 +1,7 @@
 """``usd-garment simulate`` and ``garment drape``: a simulated garment layer with GarmentAPI method
-"simulation" and its solver settings, nothing written when the simulation fails, and draped
-templates that keep their rest lengths and stay outside the rest body."""
+"simulation", its solver settings and per-frame quality, bad frames kept unless ``--strict``,
+nothing written when the simulation fails, and draped templates that keep their rest lengths
+and stay outside the rest body."""
 
 from __future__ import annotations
 
@@ -12,13 +13,15 @@ import pytest
 from click.testing import CliRunner
 from pxr import Usd
 
+import usd_garment.cli.simulate as simulate_cli
 from usd_garment.body.io import load_body_model
 from usd_garment.cli.main import main
 from usd_garment.eval.body_distance import BodySurface, signed_distance
 from usd_garment.garment.library import find_draped, load_template
 from usd_garment.garment.template import GARMENT_NAMES, LODS
+from usd_garment.methods.simulation import SimulationMethod
 from usd_garment.motion.sequence import SmplMotion
-from usd_garment.sim.checks import unique_edges
+from usd_garment.sim.checks import CheckLimits, unique_edges
 from usd_garment.sim.cloth import ITERATIONS, SUBSTEPS
 from usd_garment.sim.drape import rest_body
 from usd_garment.usd.body_layer import write_body_layer
@@ -67,6 +70,45 @@ def test_simulate_writes_a_simulation_layer(tmp_path: Path) -> None:
     assert settings["status"] == "ok" and settings["newton"] and settings["retries"] == {}
     assert settings["material"]["area_density"] == pytest.approx(0.20022)
     assert settings["max_distance_m"] < 0.15 and settings["penetrating_share_max"] <= 0.002
+    assert settings["strict"] is False and settings["bad_frames"] == 0
+    per_frame = settings["per_frame"]
+    for key in ("inside_forced", "inside_elsewhere", "stretch_p99", "substeps", "bad"):
+        assert len(per_frame[key]) == 4, key
+    assert per_frame["bad"] == [0] * 4 and per_frame["substeps"] == [SUBSTEPS] * 4
+    assert max(per_frame["inside_elsewhere"]) <= settings["inside_elsewhere_share_max"] + 1e-6
+    assert 1.0 < settings["lead_in_stretch_p99_first"] < 1.06
+    assert summary["simulation"]["per_frame"] == per_frame
+
+
+class _TightMethod(SimulationMethod):
+    """The simulation with a stretch limit no frame meets, no retries and a 2-frame lead-in."""
+
+    def __init__(self, substeps: int, iterations: int, material: object, **kwargs: object) -> None:
+        kwargs.update(max_substeps=substeps, lead_in=2, settle=0, max_bad_run=100,
+                      limits=CheckLimits(max_stretch=1.0))  # fmt: skip
+        super().__init__(substeps, iterations, material, **kwargs)  # type: ignore[arg-type]
+
+
+def test_bad_frames_are_kept_and_flagged_unless_strict(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(simulate_cli, "SimulationMethod", _TightMethod)
+    body_path, out = tmp_path / "body.usdc", tmp_path / "sim.usdc"
+    write_body_layer(body_path, _arms_down(3), load_body_model(None))
+    code, output = _run(["simulate", body_path, "-o", out, "--lod", "low"])
+    assert code == 0, output
+    assert "3 bad frames kept" in output
+    stage = Usd.Stage.Open(str(out))
+    settings = json.loads(read_garment(garment_meshes(stage)[0])["solverSettings"])
+    assert settings["status"] == "ok" and settings["bad_frames"] == 3
+    assert settings["per_frame"]["bad"] == [1, 1, 1] and settings["lead_in_bad_frames"] == 2
+    strict_out = tmp_path / "strict.usdc"
+    code, output = _run(["simulate", body_path, "-o", strict_out, "--lod", "low", "--strict"])
+    assert code != 0
+    error = [line for line in output.splitlines() if line.startswith("Error")]
+    assert len(error) == 1, output
+    assert "simulation failed at lead-in frame 0: edge stretch p99" in error[0]
+    assert not strict_out.exists()
 
 
 def test_failed_simulation_writes_nothing(tmp_path: Path) -> None:

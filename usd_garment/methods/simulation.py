@@ -1,6 +1,7 @@
 """The physics baseline and training-data maker as a garment method: the garment simulated with
 Newton's Style3D cloth (``usd_garment.sim``) on the animated body, starting from the draped
-template on the rest body, with every frame checked (NaN, inside the body, far from it).
+template graded to the body's shape on the shaped T-pose body, with every frame checked (NaN,
+inside the body where the pose does not force it, far from it, stretch).
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ import numpy as np
 import torch
 from scipy.spatial import cKDTree
 
-from usd_garment.body.joints import NUM_BETAS, NUM_JOINTS
+from usd_garment.body.joints import NUM_JOINTS
 from usd_garment.body.lbs import blend_shapes
 from usd_garment.body.model import BodyModel
 from usd_garment.garment.library import find_draped
@@ -22,6 +23,8 @@ from usd_garment.motion.sequence import SmplMotion
 from usd_garment.sim.checks import CheckLimits
 from usd_garment.sim.cloth import (
     ITERATIONS,
+    MAX_BAD_RUN,
+    MAX_SUBSTEPS,
     SUBSTEPS,
     ContactSettings,
     SimResult,
@@ -41,7 +44,8 @@ GRADING_NEIGHBOURS = 8
 
 
 class SimulationError(ValueError):
-    """A sequence failed its per-frame checks even with the most substeps: nothing to write."""
+    """A sequence failed (NaN, a garment that fell off, a long run of bad frames, or with
+    ``strict`` any frame failing its checks with the most substeps): nothing to write."""
 
 
 def _newton_version() -> str:
@@ -87,19 +91,20 @@ def shape_offsets(body: BodyModel, vertices: np.ndarray, betas: np.ndarray) -> n
 def lead_in_bodies(
     body: BodyModel, motion: SmplMotion, count: int
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The rest body under the motion's first root position, and ``count`` frames easing it into
-    the motion's first frame: pose and shape interpolated with a smoothstep, then skinned.
+    """The motion's body shape in the T-pose under the motion's first root position, and
+    ``count`` frames easing it into the motion's first frame: the pose interpolated with a
+    smoothstep (the shape held), then skinned.
 
     Returns:
-        ``(V, 3)`` rest body (β = 0, T-pose, at ``trans[0]``) and ``(count, V, 3)`` frames, the
-        last of which is the motion's first frame.
+        ``(V, 3)`` rest body (the motion's β, T-pose, at ``trans[0]``) and ``(count, V, 3)``
+        frames (m), the last of which is the motion's first frame.
     """
     s = np.arange(1, count + 1) / max(count, 1)
-    w = (s * s * (3.0 - 2.0 * s))[:, None]
+    w = (s * s * (3.0 - 2.0 * s))[:, None, None]
     trans0 = np.asarray(motion.trans[:1], dtype=np.float64)
-    rest = _posed(body, np.zeros(NUM_BETAS), np.zeros((1, NUM_JOINTS, 3)), trans0)[0]
-    pose = w[:, :, None] * np.asarray(motion.pose[:1], dtype=np.float64)
-    betas = w * np.asarray(motion.betas, dtype=np.float64)[None]
+    betas = np.asarray(motion.betas, dtype=np.float64)
+    rest = _posed(body, betas, np.zeros((1, NUM_JOINTS, 3)), trans0)[0]
+    pose = w * np.asarray(motion.pose[:1], dtype=np.float64)
     return rest, _posed(body, betas, pose, np.repeat(trans0, count, axis=0))
 
 
@@ -108,15 +113,17 @@ class SimulationMethod:
 
     The garment's rest geometry is the template graded to the motion's body shape (see
     ``shape_offsets``: a garment of the wearer's size); it starts from the draped template (the
-    committed or cached one for this body, else draped on the spot) on the rest body placed at
-    the motion's first root position, which eases into the first frame over ``lead_in`` frames
-    (pose and shape interpolated), holds it for ``settle`` frames, then plays the motion.
-    A sequence that fails its checks raises :class:`SimulationError`. After ``predict``,
-    ``result`` holds the ``SimResult`` and ``settings`` the per-frame retries.
+    committed or cached one for this body, else draped on the spot) graded by the same offsets,
+    on the motion's body shape in the T-pose placed at the motion's first root position, which
+    eases into the first frame's pose over ``lead_in`` frames, holds it for ``settle`` frames,
+    then plays the motion. Frames that fail their checks even with ``max_substeps`` are kept
+    and flagged (``strict``: the first one fails the sequence); NaN, a garment that fell off or
+    more than ``max_bad_run`` bad frames in a row raise :class:`SimulationError`. After
+    ``predict``, ``result`` holds the ``SimResult`` and ``settings`` the per-frame quality.
     """
 
     name = "simulation"
-    version = "1"
+    version = "2"
 
     def __init__(
         self,
@@ -125,14 +132,22 @@ class SimulationMethod:
         material: ClothMaterial | None = None,
         lead_in: int = LEAD_IN_FRAMES,
         settle: int = SETTLE_FRAMES,
-        max_substeps: int = 16,
+        max_substeps: int = MAX_SUBSTEPS,
         start: GarmentTemplate | None = None,
+        *,
+        strict: bool = False,
+        limits: CheckLimits | None = None,
+        max_bad_run: int = MAX_BAD_RUN,
     ) -> None:
         """Args: solver steps and iterations per frame, the fabric (cotton by default), lead-in
-        and settle frames, the most substeps a retried frame may use, and the start shape
-        (default: the draped template)."""
-        if substeps < 1 or iterations < 1 or lead_in < 0 or settle < 0:
-            raise ValueError("substeps and iterations must be >= 1, lead-in and settle >= 0")
+        and settle frames, the most substeps a retried frame may use, the start shape (default:
+        the draped template), whether the first bad frame fails the sequence (``strict``), the
+        frame checks' limits (``CheckLimits()`` by default) and the most consecutive bad frames
+        kept when not strict."""
+        if substeps < 1 or iterations < 1 or lead_in < 0 or settle < 0 or max_bad_run < 0:
+            raise ValueError(
+                "substeps and iterations must be >= 1, lead-in, settle and max_bad_run >= 0"
+            )
         if max_substeps < substeps:
             raise ValueError(f"max substeps ({max_substeps}) below substeps ({substeps})")
         self.substeps = substeps
@@ -142,12 +157,16 @@ class SimulationMethod:
         self.settle = settle
         self.max_substeps = max_substeps
         self.start = start
+        self.strict = strict
+        self.limits = limits or CheckLimits()
+        self.max_bad_run = max_bad_run
         self.start_source = ""
         self.result: SimResult | None = None
 
     @property
     def settings(self) -> dict[str, Any]:
-        """Solver settings and, after ``predict``, retries and check figures (JSON-ready)."""
+        """Solver settings and, after ``predict``, the per-frame quality and worst check figures
+        (JSON-ready; see ``result_summary``)."""
         out: dict[str, Any] = {
             "solver": "newton.SolverStyle3D",
             "newton": _newton_version(),
@@ -159,8 +178,12 @@ class SimulationMethod:
             "material": self.material.to_dict(),
             "rest_shape": f"template graded to the body shape ({GRADING_NEIGHBOURS} nearest "
             "rest-body vertices' shape blendshapes)",
+            "start_shape": "draped template graded like the rest shape, on the shaped T-pose "
+            "body; the lead-in eases the pose only",
             "contact": asdict(ContactSettings()),
-            "limits": asdict(CheckLimits()),
+            "limits": asdict(self.limits),
+            "strict": self.strict,
+            "max_bad_run": self.max_bad_run,
         }
         if self.start_source:
             out["start"] = self.start_source
@@ -178,7 +201,9 @@ class SimulationMethod:
         """Simulated garment points ``(T, N, 3)`` float32, canonical frame (m).
 
         Raises:
-            SimulationError: a frame failed its checks with ``max_substeps`` substeps.
+            SimulationError: a frame had NaNs or a vertex farther than the limits allow from
+                the body, more than ``max_bad_run`` frames in a row failed their checks with
+                ``max_substeps`` substeps, or (``strict``) any frame did.
         """
         start = self.start
         self.start_source = "given"
@@ -198,7 +223,11 @@ class SimulationMethod:
             if progress is not None and done > warmup:
                 progress(done - warmup)
 
-        graded = template.vertices + shape_offsets(body, template.vertices, motion.betas)
+        # The rest shape and the start are graded by the same per-vertex offsets, so the draped
+        # start on the shaped T-pose body matches the graded rest lengths from the first frame.
+        offsets = shape_offsets(body, template.vertices, motion.betas)
+        graded = template.vertices + offsets
+        initial = np.asarray(start.vertices, np.float64) + offsets + motion.trans[0]
         self.result = simulate_sequence(
             graded,
             template.faces,
@@ -212,32 +241,78 @@ class SimulationMethod:
             iterations=self.iterations,
             fps=motion.fps,
             max_substeps=self.max_substeps,
+            limits=self.limits,
+            strict=self.strict,
+            max_bad_run=self.max_bad_run,
             progress=report,
-            initial_vertices=np.asarray(start.vertices, np.float64) + motion.trans[0],
+            initial_vertices=initial,
         )
         if not self.result.ok:
             raise SimulationError(f"simulation failed at {self.result.message}")
         return self.result.points
 
 
+def _rounded(values: list[float], digits: int) -> list[float | None]:
+    """``values`` rounded to ``digits`` decimals, non-finite ones as None (valid JSON)."""
+    return [round(float(v), digits) if np.isfinite(v) else None for v in values]
+
+
+def _reduce(values: list[float], reduce: Any) -> float | None:
+    """``reduce`` (e.g. ``max``, ``np.mean``) of the finite ``values``; None when there are none."""
+    finite = [float(v) for v in values if np.isfinite(v)]
+    return float(reduce(finite)) if finite else None
+
+
 def result_summary(result: SimResult, substeps: int) -> dict[str, Any]:
-    """Per-frame retries (frame → substep doublings, frames without any left out) and the worst
-    check figures of a simulated sequence, JSON-ready."""
+    """The quality of a simulated sequence, JSON-ready and compact.
+
+    Keys: ``status``, ``message``; ``retries`` (motion frame → substep doublings, frames without
+    any left out); ``seconds_per_frame``; ``nan_frames``; ``bad_frames`` and
+    ``lead_in_bad_frames`` (frames kept although they failed their checks); the worst figures
+    over the motion frames: ``inside_share_mean/max`` (inside the body, forced or not),
+    ``inside_forced_share_mean/max``, ``inside_elsewhere_share_mean/max``,
+    ``penetrating_share_max`` (inside-elsewhere deeper than the limit's depth),
+    ``max_distance_m``, ``stretch_p99_max``; the lead-in's ``lead_in_stretch_p99_first`` and
+    ``lead_in_stretch_p99_max``; and ``per_frame``, lists over the motion frames (shares as
+    fractions rounded to 6 decimals, distances in m to 4, stretch to 4; None where NaN):
+    ``inside_forced``, ``inside_elsewhere``, ``penetrating``, ``max_distance_m``,
+    ``stretch_p99``, ``substeps`` (used, after retries) and ``bad`` (0/1).
+    """
     checks = result.checks
     retries = {
         str(i): int(np.log2(used // substeps)) for i, used in enumerate(result.substeps)
         if used > substeps
     }  # fmt: skip
-    finite = [c for c in checks if c.nan_count == 0]
+    forced = [c.inside_forced_share for c in checks]
+    elsewhere = [c.inside_elsewhere_share for c in checks]
+    inside = [c.inside_share for c in checks]
+    lead = [c.stretch_p99 for c in result.lead_in_checks]
     return {
         "status": result.status,
         "message": result.message,
         "retries": retries,
         "seconds_per_frame": result.seconds_per_frame,
-        "nan_frames": len(checks) - len(finite),
-        "inside_share_mean": float(np.mean([c.inside_share for c in finite])) if finite else None,
-        "inside_share_max": max((c.inside_share for c in finite), default=None),
-        "penetrating_share_max": max((c.penetrating_share for c in finite), default=None),
-        "max_distance_m": max((c.max_distance for c in finite), default=None),
-        "stretch_p99_max": max((c.stretch_p99 for c in finite), default=None),
+        "nan_frames": sum(1 for c in checks if c.nan_count),
+        "bad_frames": int(sum(result.bad)),
+        "lead_in_bad_frames": int(sum(result.lead_in_bad)),
+        "inside_share_mean": _reduce(inside, np.mean),
+        "inside_share_max": _reduce(inside, max),
+        "inside_forced_share_mean": _reduce(forced, np.mean),
+        "inside_forced_share_max": _reduce(forced, max),
+        "inside_elsewhere_share_mean": _reduce(elsewhere, np.mean),
+        "inside_elsewhere_share_max": _reduce(elsewhere, max),
+        "penetrating_share_max": _reduce([c.penetrating_share for c in checks], max),
+        "max_distance_m": _reduce([c.max_distance for c in checks], max),
+        "stretch_p99_max": _reduce([c.stretch_p99 for c in checks], max),
+        "lead_in_stretch_p99_first": _reduce(lead[:1], max),
+        "lead_in_stretch_p99_max": _reduce(lead, max),
+        "per_frame": {
+            "inside_forced": _rounded(forced, 6),
+            "inside_elsewhere": _rounded(elsewhere, 6),
+            "penetrating": _rounded([c.penetrating_share for c in checks], 6),
+            "max_distance_m": _rounded([c.max_distance for c in checks], 4),
+            "stretch_p99": _rounded([c.stretch_p99 for c in checks], 4),
+            "substeps": [int(n) for n in result.substeps],
+            "bad": [int(b) for b in result.bad],
+        },
     }

@@ -1,6 +1,12 @@
 """Per-frame sanity checks of a simulated garment against the posed body: NaNs, vertices inside
 the body, vertices far from it (a garment that fell through reads 0 % inside), edge stretch.
-The signed distances to the body come from the caller (the simulator queries its collider)."""
+
+Inside is the project's one inside test, the generalized winding number of
+``usd_garment.eval.body_distance.signed_distance``. An inside vertex is *forced* where its
+closest body point lies itself inside the body (a limb pressed into the trunk: no garment can be
+outside there) and *elsewhere* otherwise; frames are judged on the elsewhere share only.
+Shapes: N garment vertices, E garment edges, V body vertices. Units: metres.
+"""
 
 from __future__ import annotations
 
@@ -8,16 +14,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from usd_garment.eval.body_distance import BodySurface, signed_distance
+
 
 @dataclass(frozen=True)
 class CheckLimits:
     """Thresholds that make a simulated frame bad.
 
     Attributes:
-        inside_depth: a vertex counts as penetrating when its signed distance is below
-            ``-inside_depth`` (m); the contact radius of the solver lets cloth graze the skin.
+        inside_depth: an inside-elsewhere vertex counts as penetrating when its signed distance
+            is below ``-inside_depth`` (m); the contact radius of the solver lets cloth graze
+            the skin.
         max_inside_share: largest tolerated share of penetrating vertices (0..1).
-        max_distance: largest tolerated distance of any vertex from the body surface (m).
+        max_distance: largest tolerated distance of any vertex from the body surface (m): a
+            vertex farther than this means the garment fell off (fatal even when bad frames
+            are kept).
         max_stretch: largest tolerated p99 of current / rest edge length.
     """
 
@@ -33,8 +44,12 @@ class FrameCheck:
 
     Attributes:
         nan_count: garment vertices with a NaN or infinite coordinate.
-        inside_share: share of vertices with signed distance < 0 (inside the body).
-        penetrating_share: share of vertices deeper than ``CheckLimits.inside_depth``.
+        inside_share: share of vertices inside the body (winding number > 0.5), forced or not.
+        inside_forced_share: share of vertices inside where the pose forces it (their closest
+            body point lies inside another body part).
+        inside_elsewhere_share: share of vertices inside, not forced (the simulation's fault).
+        penetrating_share: share of inside-elsewhere vertices deeper than
+            ``CheckLimits.inside_depth``: what the frame is judged on.
         max_distance: largest unsigned distance of a vertex from the body surface (m).
         stretch_p99: 99th percentile of current / rest edge length.
         stretch_max: largest current / rest edge length.
@@ -42,6 +57,8 @@ class FrameCheck:
 
     nan_count: int
     inside_share: float
+    inside_forced_share: float
+    inside_elsewhere_share: float
     penetrating_share: float
     max_distance: float
     stretch_p99: float
@@ -53,11 +70,24 @@ class FrameCheck:
         if self.nan_count:
             reasons.append(f"{self.nan_count} NaN vertices")
         if self.penetrating_share > limits.max_inside_share:
-            reasons.append(f"{100 * self.penetrating_share:.2f}% of vertices inside the body")
+            reasons.append(
+                f"{100 * self.penetrating_share:.2f}% of vertices inside the body "
+                f"(not forced by the pose)"
+            )
         if not self.max_distance <= limits.max_distance:
             reasons.append(f"a vertex {self.max_distance:.3f} m from the body")
         if not self.stretch_p99 <= limits.max_stretch:
             reasons.append(f"edge stretch p99 {self.stretch_p99:.3f}")
+        return reasons
+
+    def fatal(self, limits: CheckLimits) -> list[str]:
+        """The reasons no later frame can recover from: NaN, or a vertex farther than
+        ``limits.max_distance`` from the body (the garment fell off)."""
+        reasons = []
+        if self.nan_count:
+            reasons.append(f"{self.nan_count} NaN vertices")
+        if not self.max_distance <= limits.max_distance:
+            reasons.append(f"a vertex {self.max_distance:.3f} m from the body (fell off)")
         return reasons
 
 
@@ -79,12 +109,35 @@ def edge_lengths(points: np.ndarray, edges: np.ndarray) -> np.ndarray:
     return np.linalg.norm(points[..., edges[:, 0], :] - points[..., edges[:, 1], :], axis=-1)
 
 
+def frame_body_distance(
+    points: np.ndarray, body_vertices: np.ndarray, surface: BodySurface
+) -> tuple[np.ndarray, np.ndarray]:
+    """Signed distance of one frame's garment to its body with the shared query.
+
+    Args:
+        points: ``(N, 3)`` garment vertices (m), all finite.
+        body_vertices: ``(V, 3)`` posed body of the same frame (m).
+        surface: the body's ``BodySurface``.
+
+    Returns:
+        ``(N,)`` float64 signed distance (m, negative inside, winding number) and ``(N,)`` bool
+        forced (inside where a body part is pressed into another).
+    """
+    query = signed_distance(
+        np.asarray(points, dtype=np.float32)[None],
+        np.asarray(body_vertices, dtype=np.float32)[None],
+        surface,
+    )
+    return query.distance[0], query.forced[0]
+
+
 def check_frame(
     points: np.ndarray,
     body_distance: np.ndarray,
     rest_edge_lengths: np.ndarray,
     edges: np.ndarray,
     limits: CheckLimits,
+    forced: np.ndarray | None = None,
 ) -> FrameCheck:
     """Measure one simulated frame.
 
@@ -95,6 +148,8 @@ def check_frame(
         rest_edge_lengths: ``(E,)`` rest lengths of ``edges`` (m).
         edges: ``(E, 2)`` garment edges (see ``unique_edges``).
         limits: thresholds; only ``inside_depth`` is used here.
+        forced: ``(N,)`` bool, inside vertices whose penetration the pose forces (see
+            ``frame_body_distance``); none by default.
 
     Returns:
         The frame's ``FrameCheck``; with NaNs present, the geometric figures are NaN.
@@ -103,14 +158,35 @@ def check_frame(
     nan_count = int((~finite).sum())
     if nan_count:
         nan = float("nan")
-        return FrameCheck(nan_count, nan, nan, nan, nan, nan)
+        return FrameCheck(nan_count, nan, nan, nan, nan, nan, nan, nan)
     sdf = np.asarray(body_distance, dtype=np.float64)
+    inside = sdf < 0
+    is_forced = inside & (np.zeros_like(inside) if forced is None else np.asarray(forced, bool))
+    elsewhere = inside & ~is_forced
     ratio = edge_lengths(points, edges) / np.maximum(rest_edge_lengths, 1e-12)
     return FrameCheck(
         nan_count=0,
-        inside_share=float((sdf < 0).mean()),
-        penetrating_share=float((sdf < -limits.inside_depth).mean()),
+        inside_share=float(inside.mean()),
+        inside_forced_share=float(is_forced.mean()),
+        inside_elsewhere_share=float(elsewhere.mean()),
+        penetrating_share=float((elsewhere & (sdf < -limits.inside_depth)).mean()),
         max_distance=float(np.abs(sdf).max()),
         stretch_p99=float(np.percentile(ratio, 99)),
         stretch_max=float(ratio.max()),
     )
+
+
+def measure_frame(
+    points: np.ndarray,
+    body_vertices: np.ndarray,
+    surface: BodySurface,
+    rest_edge_lengths: np.ndarray,
+    edges: np.ndarray,
+    limits: CheckLimits,
+) -> FrameCheck:
+    """``check_frame`` with the shared winding-number query of ``points`` ``(N, 3)`` (m) against
+    the frame's body ``(V, 3)`` (m); frames with NaNs are not queried."""
+    if not np.isfinite(points).all():
+        return check_frame(points, np.zeros(len(points)), rest_edge_lengths, edges, limits)
+    distance, forced = frame_body_distance(points, body_vertices, surface)
+    return check_frame(points, distance, rest_edge_lengths, edges, limits, forced)

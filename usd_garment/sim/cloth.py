@@ -17,11 +17,13 @@ from typing import Any
 
 import numpy as np
 
+from usd_garment.eval.body_distance import BodySurface
 from usd_garment.sim.checks import (
     CheckLimits,
     FrameCheck,
-    check_frame,
     edge_lengths,
+    frame_body_distance,
+    measure_frame,
     unique_edges,
 )
 from usd_garment.sim.material import ClothMaterial
@@ -34,6 +36,11 @@ AABB_PAD = 0.05
 #: substep (4 iterations under-resolve the membrane: edge stretch p99 up to 1.3 in fast motions).
 SUBSTEPS = 4
 ITERATIONS = 10
+#: Most substeps a failing frame is retried with (the substeps double on each retry).
+MAX_SUBSTEPS = 16
+#: Most consecutive bad frames (failing their checks even with ``MAX_SUBSTEPS``) a sequence may
+#: keep before it fails: a short run is a hard moment of the motion, a long one a lost garment.
+MAX_BAD_RUN = 10
 
 
 @dataclass(frozen=True)
@@ -155,15 +162,13 @@ class GarmentSimulator:
         wp, newton = _import_newton()
         from newton.solvers import SolverStyle3D, style3d
 
-        from usd_garment.sim import body_query
-
         self.material = material or ClothMaterial()
         self.contact = contact or ContactSettings()
         self.substeps = substeps
         self.iterations = iterations
         self.fps = float(fps)
         self.num_vertices = len(rest)
-        self._body_query = body_query
+        self.surface = BodySurface(body_faces, len(body0))
 
         builder = newton.ModelBuilder(up_axis=newton.Axis.Y)
         SolverStyle3D.register_custom_attributes(builder)
@@ -211,9 +216,10 @@ class GarmentSimulator:
         return self.state_0.particle_q.numpy().copy()
 
     def body_distance(self) -> np.ndarray:
-        """``(N,)`` signed distance (m, negative inside) of the current garment vertices to the
-        body where the last ``step`` left it (exact closest point on the collider mesh)."""
-        return self._body_query.signed_distance(self._body_wp, self.state_0.particle_q)
+        """``(N,)`` signed distance (m, negative inside by winding number) of the current garment
+        vertices to the body where the last ``step`` left it: the shared query of
+        ``usd_garment.eval.body_distance``. The garment must be finite."""
+        return frame_body_distance(self.points, self.body_vertices, self.surface)[0]
 
     def get_state(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """A snapshot ``(points, velocities, body_vertices)`` to ``set_state`` back to."""
@@ -300,27 +306,39 @@ class SimResult:
     """A simulated sequence and how far it can be trusted.
 
     Attributes:
-        points: ``(T', N, 3)`` float32 garment vertices of the motion frames that passed their
-            checks (m); ``T' = T`` when ``ok``, otherwise the frames before the failure.
+        points: ``(T', N, 3)`` float32 garment vertices of the motion frames kept (m);
+            ``T' = T`` when ``ok``, otherwise the frames before the failure.
         checks: one ``FrameCheck`` per frame in ``points``, plus the failing frame's last try.
         substeps: substeps each frame of ``checks`` needed (more than asked after a retry).
+        bad: per frame of ``checks``, whether it failed its checks even with the most substeps
+            (kept unless strict; the last one of a failed sequence is the failing frame).
+        lead_in_checks: one ``FrameCheck`` per lead-in and settle frame simulated.
+        lead_in_bad: per lead-in and settle frame, whether it was bad.
         seconds_per_frame: mean wall time per simulated frame (lead-in included, checks and
             retries included), in seconds.
-        status: ``"ok"`` or ``"failed"``.
+        status: ``"ok"`` (every motion frame simulated; some may be ``bad``) or ``"failed"``.
         message: why it failed (empty when ``ok``).
     """
 
     points: np.ndarray
     checks: list[FrameCheck] = field(default_factory=list)
     substeps: list[int] = field(default_factory=list)
+    bad: list[bool] = field(default_factory=list)
+    lead_in_checks: list[FrameCheck] = field(default_factory=list)
+    lead_in_bad: list[bool] = field(default_factory=list)
     seconds_per_frame: float = 0.0
     status: str = "ok"
     message: str = ""
 
     @property
     def ok(self) -> bool:
-        """Whether every frame passed its checks."""
+        """Whether the whole motion was simulated (bad frames may be among them)."""
         return self.status == "ok"
+
+    @property
+    def bad_frames(self) -> int:
+        """Motion and lead-in frames that failed their checks with the most substeps."""
+        return int(sum(self.bad) + sum(self.lead_in_bad))
 
 
 def lead_in_frames(body_rest: np.ndarray, body_first: np.ndarray, count: int) -> np.ndarray:
@@ -358,7 +376,9 @@ def simulate_sequence(
     fps: float = 30.0,
     contact: ContactSettings | None = None,
     limits: CheckLimits | None = None,
-    max_substeps: int = 16,
+    max_substeps: int = MAX_SUBSTEPS,
+    strict: bool = False,
+    max_bad_run: int = MAX_BAD_RUN,
     progress: Callable[[int, int], None] | None = None,
     initial_vertices: np.ndarray | None = None,
 ) -> SimResult:
@@ -366,10 +386,14 @@ def simulate_sequence(
 
     The garment starts in its rest shape (or at ``initial_vertices``) on ``body_rest`` (the
     body it was modelled on). The body then eases into ``body_frames[0]`` over the lead-in,
-    holds it for ``settle_frames`` so the cloth settles, and plays the motion. A frame that fails
-    its checks (see ``CheckLimits``) is simulated again from the state before it with twice the
-    substeps, up to ``max_substeps``; if it still fails, the sequence stops there with status
-    "failed".
+    holds it for ``settle_frames`` so the cloth settles, and plays the motion. Each frame is
+    checked (``measure_frame``: the shared winding-number query against the frame's body,
+    judged on inside-elsewhere, see ``CheckLimits``). A frame that fails its checks is simulated
+    again from the state before it with twice the substeps, up to ``max_substeps``. A frame that
+    still fails is *bad*: with ``strict`` the sequence stops there with status "failed";
+    otherwise it is kept, flagged in ``SimResult.bad``, and the simulation goes on from it,
+    unless it has NaNs or a vertex farther than ``limits.max_distance`` from the body (the
+    garment fell off), or it is the ``max_bad_run + 1``-th bad frame in a row: those fail.
 
     Args:
         rest_vertices: ``(N, 3)`` garment rest shape (m), worn by ``body_rest``.
@@ -388,12 +412,15 @@ def simulate_sequence(
         contact: contact parameters; ``ContactSettings()`` by default.
         limits: what makes a frame bad; ``CheckLimits()`` by default.
         max_substeps: most substeps a retried frame may use.
+        strict: stop at the first bad frame instead of keeping it.
+        max_bad_run: most consecutive bad frames kept (not strict).
         progress: called as ``progress(done, total)`` after each simulated frame.
         initial_vertices: ``(N, 3)`` garment start positions on ``body_rest`` (e.g. the draped
             template); ``rest_vertices`` by default.
 
     Returns:
-        The ``SimResult``; check ``ok`` before using ``points``.
+        The ``SimResult``; check ``ok`` before using ``points``, and ``bad`` for the frames
+        kept although they failed their checks.
     """
     body_frames = np.asarray(body_frames, dtype=np.float64)
     if body_frames.ndim != 3 or body_frames.shape[2] != 3 or len(body_frames) == 0:
@@ -401,6 +428,8 @@ def simulate_sequence(
     start_body = body_frames[0] if body_rest is None else _points(body_rest, "body_rest")
     if start_body.shape != body_frames.shape[1:]:
         raise ValueError(f"body_rest must be {body_frames.shape[1:]}, got {start_body.shape}")
+    if max_bad_run < 0:
+        raise ValueError(f"max_bad_run must be >= 0, got {max_bad_run}")
     if isinstance(lead_in, (int, np.integer)):
         count = int(lead_in) if body_rest is not None else 0
         lead = lead_in_frames(start_body, body_frames[0], count)
@@ -422,13 +451,14 @@ def simulate_sequence(
     frames: list[np.ndarray] = []
     total = len(warmup) + len(body_frames)
     started = time.perf_counter()
+    bad_run = 0
     for index, body in enumerate(np.concatenate([warmup, body_frames])):
         snapshot = sim.get_state()
         tries = substeps
         while True:
             sim.substeps = tries
             points = sim.step(body)
-            check = check_frame(points, sim.body_distance(), rest_lengths, edges, limits)
+            check = measure_frame(points, body, sim.surface, rest_lengths, edges, limits)
             reasons = check.failures(limits)
             if not reasons or tries * 2 > max_substeps:
                 break
@@ -436,13 +466,30 @@ def simulate_sequence(
             tries *= 2
         sim.substeps = substeps
         in_motion = index >= len(warmup)
-        if in_motion or reasons:
+        bad = bool(reasons)
+        bad_run = bad_run + 1 if bad else 0
+        if in_motion:
             result.checks.append(check)
             result.substeps.append(tries)
-        if reasons:
+            result.bad.append(bad)
+        else:
+            result.lead_in_checks.append(check)
+            result.lead_in_bad.append(bad)
+        stop = ""
+        if bad and strict:
+            stop = ", ".join(reasons)
+        elif bad and check.fatal(limits):
+            stop = ", ".join(check.fatal(limits))
+        elif bad_run > max_bad_run:
+            stop = f"{bad_run} bad frames in a row, the last with {', '.join(reasons)}"
+        if stop:
             stage = f"motion frame {index - len(warmup)}" if in_motion else f"lead-in frame {index}"
+            if not in_motion:  # the failing frame's check goes with the motion's too
+                result.checks.append(check)
+                result.substeps.append(tries)
+                result.bad.append(True)
             result.status = "failed"
-            result.message = f"{stage}: {', '.join(reasons)} (with {tries} substeps)"
+            result.message = f"{stage}: {stop} (with {tries} substeps)"
             break
         if in_motion:
             frames.append(points)
