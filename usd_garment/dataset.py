@@ -253,8 +253,11 @@ def run_sequence(folder: str, config: DatasetConfig, spec: SequenceSpec) -> dict
     entry["checks"] = {
         key: summary.get(key)
         for key in (
-            "seconds_per_frame", "retries", "nan_frames", "inside_share_mean", "inside_share_max",
-            "penetrating_share_max", "max_distance_m", "stretch_p99_max",
+            "seconds_per_frame", "retries", "nan_frames", "bad_frames", "lead_in_bad_frames",
+            "inside_share_mean", "inside_share_max", "inside_forced_share_mean",
+            "inside_forced_share_max", "inside_elsewhere_share_mean",
+            "inside_elsewhere_share_max", "penetrating_share_max", "max_distance_m",
+            "stretch_p99_max",
         )
     }  # fmt: skip
     entry["seconds"] = time.perf_counter() - started
@@ -262,9 +265,13 @@ def run_sequence(folder: str, config: DatasetConfig, spec: SequenceSpec) -> dict
 
 
 def _fixed(config: dict[str, Any]) -> dict[str, Any]:
-    """A config without the motion and shape counts: the plan of more motions or shapes starts
-    with that of fewer, so a dataset can be resumed with more."""
-    return {k: v for k, v in config.items() if k not in ("motions", "shapes")}
+    """A config without the motion, shape and capture lists: the plan of more motions, shapes or
+    captures starts with that of fewer, so a dataset can be resumed with more."""
+    return {
+        k: v
+        for k, v in config.items()
+        if k not in ("motions", "shapes", "captures", "capture_shapes")
+    }
 
 
 def _run_task(task: tuple[str, DatasetConfig, SequenceSpec]) -> dict[str, Any]:
