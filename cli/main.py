@@ -7,6 +7,7 @@ import click
 from usd_garment import __version__
 from usd_garment.cli.amass import export_amass, import_amass
 from usd_garment.cli.body import body
+from usd_garment.cli.bvh import import_bvh
 from usd_garment.cli.dataset import dataset
 from usd_garment.cli.drape import drape
 from usd_garment.cli.dress import dress
@@ -29,6 +30,7 @@ main.add_command(garment)
 garment.add_command(drape)
 main.add_command(import_amass)
 main.add_command(export_amass)
+main.add_command(import_bvh)
 main.add_command(dress)
 main.add_command(evaluate)
 main.add_command(simulate)

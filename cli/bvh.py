@@ -1,0 +1,110 @@
+"""``usd-garment import-bvh``: BVH motion captures (CMU, Mixamo) retargeted to USD body layers."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+from usd_garment.body import load_body_model
+from usd_garment.cli.errors import user_errors
+from usd_garment.cli.options import (
+    body_model_option,
+    json_option,
+    parse_betas,
+    parse_frames,
+)
+from usd_garment.motion.bvh import FLOOR_MODES, UNITS, UP_AXES, load_bvh
+from usd_garment.usd.body_layer import write_body_layer
+from usd_garment.usd.garment_layer import check_outputs
+
+
+@click.command("import-bvh")
+@click.argument("bvh", type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(dir_okay=False, path_type=Path),
+    required=True,
+    help="USD body layer to write (.usda, .usdc or .usd).",
+)
+@click.option(
+    "--fps", type=click.FloatRange(min=0, min_open=True), default=None,
+    help="Resample to this frame rate (default: the file's frame rate, as import-amass).",
+)  # fmt: skip
+@click.option(
+    "--units", type=click.Choice(["auto", *UNITS]), default="auto", show_default=True,
+    help="Length unit of the file; auto tells m, cm and mm apart by the skeleton's height.",
+)  # fmt: skip
+@click.option(
+    "--scale", type=click.FloatRange(min=0, min_open=True), default=None,
+    help="Metres per file unit (overrides --units).",
+)  # fmt: skip
+@click.option(
+    "--up-axis", type=click.Choice(UP_AXES), default="auto", show_default=True,
+    help="Up axis of the file; auto: the axis from the hips to the head in the rest pose.",
+)  # fmt: skip
+@click.option(
+    "--floor", type=click.Choice(FLOOR_MODES), default="body", show_default=True,
+    help="body: move the clip so the body stands on y=0; capture: keep the capture's heights.",
+)  # fmt: skip
+@click.option("--frames", default=None, help="Frames A:B of the file (B exclusive).")
+@click.option("--betas", default=None, help="Shape coefficients of the body (default zero).")
+@body_model_option
+@click.option("--no-mesh", is_flag=True, help="Write the skeleton only, without the body mesh.")
+@json_option("Print the joint mapping, units and floor shift as JSON on stdout.")
+def import_bvh(
+    bvh: Path,
+    output: Path,
+    fps: float | None,
+    units: str,
+    scale: float | None,
+    up_axis: str,
+    floor: str,
+    frames: str | None,
+    betas: str | None,
+    body_model: Path | None,
+    no_mesh: bool,
+    as_json: bool,
+) -> None:
+    """Retarget a BVH motion capture (CMU, Mixamo or SMPL joint names) to the SMPL skeleton and
+    write it as a USD body layer (Y-up, metres)."""
+    frame_range, beta_values = parse_frames(frames), parse_betas(betas)
+    with user_errors():
+        if not bvh.is_file():
+            raise FileNotFoundError(f"{bvh}: no such file")
+        check_outputs(bvh, output)
+        body = load_body_model(body_model)
+        motion, info = load_bvh(
+            bvh, body, fps, beta_values, units=units, scale=scale, up_axis=up_axis,
+            floor=floor, frames=frame_range,
+        )  # fmt: skip
+        write_body_layer(output, motion, body, with_mesh=not no_mesh)
+    if as_json:
+        summary = {
+            "output": str(output),
+            "frames": motion.num_frames,
+            "fps": motion.fps,
+            "source_fps": info.source_fps,
+            "units": info.units,
+            "units_detected": info.units_detected,
+            "metres_per_unit": info.scale,
+            "skeleton_height_m": round(info.height_m, 4),
+            "up_axis": info.up_axis,
+            "floor": info.floor,
+            "floor_shift_m": round(info.floor_shift_m, 4),
+            "joint_map": info.joint_map,
+            "drivers": {k: v for k, v in info.drivers.items() if v != info.joint_map[k]},
+            "unmapped": info.unmapped,
+            "folded": info.folded,
+            "ignored": info.ignored,
+        }
+        click.echo(json.dumps(summary, indent=2))
+        return
+    unit = f"{info.units}{' (detected)' if info.units_detected else ''}"
+    click.echo(
+        f"wrote {output}: {motion.num_frames} frames at {motion.fps:g} fps; units {unit}, "
+        f"skeleton {info.height_m:.2f} m tall, {len(info.joint_map)}/24 SMPL joints mapped, "
+        f"floor shift {info.floor_shift_m:+.3f} m"
+    )
