@@ -1,0 +1,425 @@
+"""BVH import: parsing and Euler conventions, joint mapping (CMU, Mixamo, SMPL names), rest
+corrections, units, root translation, a real CMU clip through the CLI, and bad input."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from click.testing import CliRunner
+from scipy.spatial.transform import Rotation
+
+from usd_garment.body.joints import SMPL_JOINT_NAMES
+from usd_garment.body.model import BodyModel
+from usd_garment.cli.main import main
+from usd_garment.motion.amass import ZUP_TO_YUP
+from usd_garment.motion.bvh import (
+    BvhClip,
+    BvhError,
+    BvhRetarget,
+    BvhSkeleton,
+    bone_angle_errors,
+    forward_kinematics,
+    load_bvh,
+    map_joints,
+    parse_bvh,
+    read_bvh,
+    retarget,
+    up_rotation,
+    world_motion,
+)
+from usd_garment.motion.sequence import SmplMotion
+from usd_garment.usd.read import read_smpl_motion
+
+CMU_CLIP = Path("/work/shared/mocap/cmu_131_01.bvh")
+J = {name: i for i, name in enumerate(SMPL_JOINT_NAMES)}
+
+
+@dataclass
+class Joint:
+    name: str
+    parent: str | None
+    offset: tuple[float, float, float]
+    order: str = "ZYX"  # rotation channel order; the root also gets X/Y/Z position channels
+    end: tuple[float, float, float] | None = None
+
+
+def bvh_text(joints: list[Joint], angles: dict[str, np.ndarray], root_pos: np.ndarray,
+             fps: float = 120.0) -> str:  # fmt: skip
+    """A BVH file: ``angles[name]`` ``(T, 3)`` degrees in the joint's channel order (zero if
+    absent), ``root_pos`` ``(T, 3)`` file units."""
+    children: dict[str | None, list[Joint]] = {}
+    for joint in joints:
+        children.setdefault(joint.parent, []).append(joint)
+    lines = ["HIERARCHY"]
+    order: list[Joint] = []
+
+    def emit(joint: Joint, depth: int) -> None:
+        pad = "\t" * depth
+        lines.append(f"{pad}{'ROOT' if joint.parent is None else 'JOINT'} {joint.name}")
+        lines.append(pad + "{")
+        lines.append(f"{pad}\tOFFSET {' '.join(f'{v:.6f}' for v in joint.offset)}")
+        rot = " ".join(f"{a}rotation" for a in joint.order)
+        pos = "Xposition Yposition Zposition " if joint.parent is None else ""
+        lines.append(f"{pad}\tCHANNELS {6 if joint.parent is None else 3} {pos}{rot}")
+        order.append(joint)
+        for child in children.get(joint.name, []):
+            emit(child, depth + 1)
+        if joint.end is not None:
+            end = " ".join(f"{v:.6f}" for v in joint.end)
+            lines.extend([f"{pad}\tEnd Site", f"{pad}\t{{", f"{pad}\t\tOFFSET {end}", f"{pad}\t}}"])
+        lines.append(pad + "}")
+
+    emit(children[None][0], 0)
+    frames = root_pos.shape[0]
+    lines += ["MOTION", f"Frames: {frames}", f"Frame Time: {1.0 / fps:.6f}"]
+    for t in range(frames):
+        row = list(root_pos[t])
+        for joint in order:
+            row += list(angles.get(joint.name, np.zeros((frames, 3)))[t])
+        lines.append(" ".join(f"{v:.6f}" for v in row))
+    return "\n".join(lines) + "\n"
+
+
+def mixamo_skeleton(rest: np.ndarray, cm: bool = True) -> list[Joint]:
+    """Mixamo names, T-pose built from SMPL rest joints ``(24, 3)`` (m), in cm or m."""
+    unit = 100.0 if cm else 1.0
+    smpl_of = {
+        "Hips": "pelvis", "Spine": "spine1", "Spine1": "spine2", "Spine2": "spine3",
+        "Neck": "neck", "Head": "head",
+    }  # fmt: skip
+    parent_of = {"Hips": None, "Spine": "Hips", "Spine1": "Spine", "Spine2": "Spine1",
+                 "Neck": "Spine2", "Head": "Neck"}  # fmt: skip
+    for side, s in (("Left", "left"), ("Right", "right")):
+        chain = [("UpLeg", "hip", "Hips"), ("Leg", "knee", "UpLeg"), ("Foot", "ankle", "Leg"),
+                 ("ToeBase", "foot", "Foot"), ("Shoulder", "collar", "Spine2"),
+                 ("Arm", "shoulder", "Shoulder"), ("ForeArm", "elbow", "Arm"),
+                 ("Hand", "wrist", "ForeArm"), ("HandMiddle1", "hand", "Hand")]  # fmt: skip
+        for name, smpl, parent in chain:
+            smpl_of[side + name] = f"{s}_{smpl}"
+            parent_of[side + name] = parent if parent == "Spine2" else side + parent
+            if parent in ("Hips", "Spine2"):
+                parent_of[side + name] = parent
+    joints = []
+    for name, parent in parent_of.items():
+        here = rest[J[smpl_of[name]]]
+        offset = here - (rest[J[smpl_of[parent]]] if parent else np.array([0.0, 0.0, 0.0]))
+        end = (0.0, 0.18 * unit, 0.0) if name == "Head" else None
+        joints.append(Joint(f"mixamorig:{name}", None if parent is None else f"mixamorig:{parent}",
+                            tuple(offset * unit), "ZXY", end))  # fmt: skip
+    return joints
+
+
+def cmu_skeleton() -> list[Joint]:
+    """CMU (cgspeed) names and rest pose, metres: legs spread 20°, arms horizontal, zero-length
+    LHipJoint / LowerBack / Neck / LeftShoulder joints."""
+    joints = [Joint("Hips", None, (0.0, 0.0, 0.0)),
+              Joint("LowerBack", "Hips", (0.0, 0.0, 0.0)),
+              Joint("Spine", "LowerBack", (0.0, 0.11, 0.0)),
+              Joint("Spine1", "Spine", (0.0, 0.11, 0.0)),
+              Joint("Neck", "Spine1", (0.0, 0.0, 0.0)),
+              Joint("Neck1", "Neck", (0.0, 0.09, 0.0)),
+              Joint("Head", "Neck1", (0.0, 0.09, 0.0), end=(0.0, 0.1, 0.0))]  # fmt: skip
+    for side, sign in (("Left", 1.0), ("Right", -1.0)):
+        l = side[0]  # noqa: E741
+        joints += [
+            Joint(f"{l}HipJoint", "Hips", (0.0, 0.0, 0.0)),
+            Joint(f"{side}UpLeg", f"{l}HipJoint", (sign * 0.07, -0.09, 0.04)),
+            Joint(f"{side}Leg", f"{side}UpLeg", (sign * 0.14, -0.39, 0.0)),
+            Joint(f"{side}Foot", f"{side}Leg", (sign * 0.13, -0.37, 0.0)),
+            Joint(f"{side}ToeBase", f"{side}Foot", (0.0, -0.02, 0.12), end=(0.0, 0.0, 0.06)),
+            Joint(f"{side}Shoulder", "Spine1", (0.0, 0.0, 0.0)),
+            Joint(f"{side}Arm", f"{side}Shoulder", (sign * 0.17, 0.08, 0.0), "ZXY"),
+            Joint(f"{side}ForeArm", f"{side}Arm", (sign * 0.25, 0.0, 0.0), "ZXY"),
+            Joint(f"{side}Hand", f"{side}ForeArm", (sign * 0.19, 0.0, 0.0), "ZXY"),
+            Joint(f"{side}FingerBase", f"{side}Hand", (sign * 0.04, 0.0, 0.0), "ZXY",
+                  end=(sign * 0.03, 0.0, 0.0)),
+            Joint(f"{l}Thumb", f"{side}Hand", (0.0, 0.0, 0.0), "ZXY", end=(0.03, 0.0, 0.03)),
+        ]  # fmt: skip
+    return joints
+
+
+def write(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+def smpl_rest(body: BodyModel) -> np.ndarray:
+    with torch.no_grad():
+        return body.shaped(torch.zeros(1, 10))[1][0].double().numpy()
+
+
+def posed_joints(body: BodyModel, motion: SmplMotion) -> np.ndarray:
+    with torch.no_grad():
+        out = body(torch.as_tensor(motion.betas), torch.as_tensor(motion.pose),
+                   torch.as_tensor(motion.trans))  # fmt: skip
+    return out.joints.double().numpy()
+
+
+def angle_deg(a: np.ndarray, b: np.ndarray) -> float:
+    cos = np.dot(a, b) / (np.linalg.norm(a) * np.linalg.norm(b))
+    return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+
+
+# --------------------------------------------------------------------------------------------
+
+
+def test_euler_channels_compose_in_the_listed_order() -> None:
+    joints = [Joint("Hips", None, (0.0, 1.0, 0.0), "ZYX"),
+              Joint("Spine", "Hips", (0.0, 0.2, 0.0), "XYZ", end=(0.0, 0.1, 0.0))]  # fmt: skip
+    angles = {"Hips": np.array([[30.0, -20.0, 50.0]]), "Spine": np.array([[10.0, 70.0, -40.0]])}
+    clip = parse_bvh(bvh_text(joints, angles, np.array([[1.0, 2.0, 3.0]])))
+    rot, pos = forward_kinematics(clip)
+    rz, ry, rx = (Rotation.from_euler(a, v, degrees=True).as_matrix()
+                  for a, v in zip("zyx", (30.0, -20.0, 50.0), strict=True))  # fmt: skip
+    hips = rz @ ry @ rx
+    sx, sy, sz = (Rotation.from_euler(a, v, degrees=True).as_matrix()
+                  for a, v in zip("xyz", (10.0, 70.0, -40.0), strict=True))  # fmt: skip
+    np.testing.assert_allclose(rot[0, 0], hips, atol=1e-12)
+    np.testing.assert_allclose(rot[0, 1], hips @ sx @ sy @ sz, atol=1e-12)
+    np.testing.assert_allclose(pos[0, 0], [1.0, 2.0, 3.0])  # position channels replace OFFSET
+    np.testing.assert_allclose(pos[0, 1], [1.0, 2.0, 3.0] + hips @ [0.0, 0.2, 0.0], atol=1e-12)
+    assert clip.fps == 120.0
+
+
+def mapped_names(skeleton: BvhSkeleton) -> dict[str, str]:
+    return {n: skeleton.names[m] for n, m in zip(SMPL_JOINT_NAMES, map_joints(skeleton),
+            strict=True) if m is not None}  # fmt: skip
+
+
+def test_joint_mapping_by_name_and_structure(body_model: BodyModel) -> None:
+    cmu = mapped_names(parse_bvh(bvh_text(cmu_skeleton(), {}, np.zeros((1, 3)))).skeleton)
+    assert cmu["spine1"] == "LowerBack" and cmu["spine2"] == "Spine" and cmu["spine3"] == "Spine1"
+    assert cmu["left_collar"] == "LeftShoulder" and cmu["left_shoulder"] == "LeftArm"
+    assert cmu["left_wrist"] == "LeftHand" and cmu["left_hand"] == "LeftFingerBase"
+    assert cmu["left_ankle"] == "LeftFoot" and cmu["left_foot"] == "LeftToeBase"
+    assert cmu["neck"] == "Neck" and len(cmu) == 24
+    mixamo_text = bvh_text(mixamo_skeleton(smpl_rest(body_model)), {}, np.zeros((1, 3)))
+    mixamo = mapped_names(parse_bvh(mixamo_text).skeleton)
+    assert mixamo["spine1"] == "mixamorig:Spine" and mixamo["spine3"] == "mixamorig:Spine2"
+    assert mixamo["left_collar"] == "mixamorig:LeftShoulder"
+    assert mixamo["left_hand"] == "mixamorig:LeftHandMiddle1" and len(mixamo) == 24
+    # the real CMU files name the collar LeftCollar and the shoulder LeftShoulder
+    real = mapped_names(read_bvh(CMU_CLIP).skeleton)
+    assert real["left_collar"] == "LeftCollar" and real["left_shoulder"] == "LeftShoulder"
+    assert real["left_wrist"] == "LeftWrist" and real["left_hand"] == "LFingers"
+    assert real["spine1"] == "lowerback" and real["spine3"] == "Chest2" and len(real) == 24
+
+
+#: Bones whose direction the import reproduces exactly: each is moved by one BVH joint.
+EXACT_BONES = (
+    "left_hip>left_knee", "left_knee>left_ankle", "left_ankle>left_foot", "spine1>spine2",
+    "spine2>spine3", "left_collar>left_shoulder", "left_shoulder>left_elbow",
+    "left_elbow>left_wrist", "left_wrist>left_hand", "right_hip>right_knee",
+    "right_shoulder>right_elbow", "right_elbow>right_wrist",
+)  # fmt: skip
+
+
+def bone_errors(
+    clip: BvhClip, motion: SmplMotion, info: BvhRetarget, body: BodyModel
+) -> dict[str, np.ndarray]:
+    _, positions, _ = world_motion(clip, info.scale, up_rotation(info.up_axis))
+    return bone_angle_errors(positions, posed_joints(body, motion), map_joints(clip.skeleton))
+
+
+def test_rest_pose_gives_the_bvh_rest_bone_directions(body_model: BodyModel) -> None:
+    real = read_bvh(CMU_CLIP)
+    real.values = np.zeros((2, real.values.shape[1]))  # the file's rest pose
+    synthetic = parse_bvh(bvh_text(cmu_skeleton(), {}, np.zeros((2, 3))))
+    for clip in (real, synthetic):
+        motion, info = retarget(clip, body_model, floor="capture")
+        errors = bone_errors(clip, motion, info, body_model)
+        assert set(EXACT_BONES) <= set(errors)
+        worst = {k: float(v.max()) for k, v in errors.items() if not k.startswith("pelvis>")}
+        assert max(worst.values()) < 1e-3, worst
+    # the real CMU rest has the arms hanging down: so do SMPL's (T-pose arms turned by 90°)
+    joints = posed_joints(body_model, retarget(real, body_model)[0])[0]
+    for side in ("left", "right"):
+        arm = joints[J[f"{side}_elbow"]] - joints[J[f"{side}_shoulder"]]
+        assert angle_deg(arm, np.array([0.0, -1.0, 0.0])) < 1.0
+
+
+def test_t_pose_rig_maps_to_the_zero_pose(body_model: BodyModel, tmp_path: Path) -> None:
+    rest = smpl_rest(body_model)
+    hips = (rest[0] + [0.0, 1.2, 0.0]) * 100.0  # cm
+    path = write(tmp_path / "mixamo.bvh",
+                 bvh_text(mixamo_skeleton(rest), {}, np.repeat(hips[None], 3, axis=0)))  # fmt: skip
+    motion, info = load_bvh(path, body_model, floor="capture")
+    assert info.units == "cm" and info.units_detected and info.scale == 0.01
+    assert not info.unmapped and motion.fps == 120.0
+    np.testing.assert_allclose(motion.pose, 0.0, atol=1e-5)
+    np.testing.assert_allclose(motion.trans, [[0.0, 1.2, 0.0]] * 3, atol=1e-5)
+    # floor "body": the T-posed body stands on y = 0
+    motion, info = load_bvh(path, body_model)
+    with torch.no_grad():
+        low = body_model(torch.as_tensor(motion.betas), torch.as_tensor(motion.pose),
+                         torch.as_tensor(motion.trans)).vertices[..., 1].min()  # fmt: skip
+    assert abs(float(low)) < 1e-5
+    sole = float(body_model.v_template[:, 1].min())
+    assert info.floor_shift_m == pytest.approx(-1.2 - sole, abs=1e-5)
+
+
+def test_elbow_bend_and_random_poses_keep_bone_directions(body_model: BodyModel) -> None:
+    rng = np.random.default_rng(0)
+    skeleton = cmu_skeleton()
+    frames = 5
+    angles = {j.name: rng.uniform(-40.0, 40.0, (frames, 3)) for j in skeleton}
+    angles["LeftForeArm"] = np.zeros((frames, 3))
+    angles["LeftForeArm"][:, 2] = -90.0  # ZXY: bend forward about Y
+    root = np.stack([np.linspace(0.0, 0.3, frames), np.full(frames, 0.95),
+                     np.linspace(0.0, 1.0, frames)], axis=1)  # fmt: skip
+    clip = parse_bvh(bvh_text(skeleton, angles, root))
+    motion, info = retarget(clip, body_model, floor="capture")
+    assert info.units == "m" and not info.unmapped
+    assert {"LHipJoint", "RHipJoint", "Neck1"} <= set(info.folded)
+    assert {"LThumb", "RThumb"} == set(info.ignored)
+    errors = bone_errors(clip, motion, info, body_model)
+    for bone in EXACT_BONES:
+        assert errors[bone].max() < 1e-3, (bone, errors[bone])
+    joints = posed_joints(body_model, motion)
+    upper = joints[:, J["left_elbow"]] - joints[:, J["left_shoulder"]]
+    fore = joints[:, J["left_wrist"]] - joints[:, J["left_elbow"]]
+    for t in range(frames):
+        assert angle_deg(upper[t], fore[t]) == pytest.approx(90.0, abs=1e-3)
+    elbow = np.degrees(np.linalg.norm(motion.pose[:, J["left_elbow"]], axis=1))
+    np.testing.assert_allclose(elbow, 90.0, atol=3.0)  # up to the small rest corrections
+    # the SMPL pelvis follows the BVH hips (J0 + trans = hips)
+    np.testing.assert_allclose(joints[:, 0], root, atol=1e-5)
+
+
+def test_units_and_up_axis_do_not_change_the_motion(body_model: BodyModel) -> None:
+    rest = smpl_rest(body_model)
+    rng = np.random.default_rng(1)
+    frames = 4
+    angles = {f"mixamorig:{n}": rng.uniform(-30.0, 30.0, (frames, 3))
+              for n in ("Hips", "Spine1", "LeftArm", "RightLeg", "Neck")}  # fmt: skip
+    root = np.stack([np.zeros(frames), np.full(frames, 1.1), np.linspace(0, 0.5, frames)], 1)
+    cm = parse_bvh(bvh_text(mixamo_skeleton(rest), angles, root * 100.0))
+    m = parse_bvh(bvh_text(mixamo_skeleton(rest, cm=False), angles, root))
+    # Z-up: offsets and positions turned, rotations about the turned axes (Y→Z, Z→−Y)
+    zup_joints = [Joint(j.name, j.parent, tuple(ZUP_TO_YUP.T @ j.offset), "YXZ",
+                        None if j.end is None else tuple(ZUP_TO_YUP.T @ j.end))
+                  for j in mixamo_skeleton(rest, cm=False)]  # fmt: skip
+    zup_angles = {k: v * [-1.0, 1.0, 1.0] for k, v in angles.items()}
+    zup = parse_bvh(bvh_text(zup_joints, zup_angles, root @ ZUP_TO_YUP))
+    results = [retarget(c, body_model) for c in (cm, m, zup)]
+    assert [r[1].units for r in results] == ["cm", "m", "m"]
+    assert [r[1].up_axis for r in results] == ["y", "y", "z"]
+    for motion, _ in results[1:]:
+        np.testing.assert_allclose(motion.pose, results[0][0].pose, atol=2e-5)
+        np.testing.assert_allclose(motion.trans, results[0][0].trans, atol=2e-5)
+    scaled, info = retarget(cm, body_model, scale=0.01)
+    assert info.units == "custom" and not info.units_detected
+    np.testing.assert_allclose(scaled.pose, results[0][0].pose, atol=1e-6)
+    tiny = parse_bvh(bvh_text(mixamo_skeleton(rest * 0.1, cm=False), {}, root * 0.1))
+    with pytest.raises(BvhError, match="cannot tell the units"):
+        retarget(tiny, body_model)
+
+
+def test_real_cmu_clip_through_the_cli(body_model: BodyModel, tmp_path: Path) -> None:
+    out = tmp_path / "walk.usda"
+    args = ["import-bvh", str(CMU_CLIP), "-o", str(out), "--frames", "0:60", "--fps", "30"]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 0, result.output
+    assert "15 frames at 30 fps" in result.stdout and "units m (detected)" in result.stdout
+    motion, _ = read_smpl_motion(out, body_model)
+    assert motion.num_frames == 15 and motion.fps == 30.0
+    direct, info = load_bvh(CMU_CLIP, body_model, fps=30.0, frames=(0, 60))
+    angle = (Rotation.from_rotvec(motion.pose.reshape(-1, 3)).inv()
+             * Rotation.from_rotvec(direct.pose.reshape(-1, 3))).magnitude()  # fmt: skip
+    assert angle.max() < 1e-4
+    np.testing.assert_allclose(motion.trans, direct.trans, atol=1e-5)
+    # every 4th source frame is an output frame: the posed SMPL bones follow the BVH's
+    clip = read_bvh(CMU_CLIP)
+    _, positions, _ = world_motion(clip, info.scale, up_rotation(info.up_axis), slice(0, 60, 4))
+    errors = bone_angle_errors(positions, posed_joints(body_model, motion),
+                               map_joints(clip.skeleton))  # fmt: skip
+    for bone in (*EXACT_BONES, "spine3>neck", "neck>head"):
+        assert errors[bone].max() < 0.01, (bone, errors[bone].max())
+    # walking forward (+Z) with the feet on the floor, head up
+    joints = posed_joints(body_model, motion)
+    assert joints[:, J["head"], 1].min() > 1.3 and joints[:, J["left_ankle"], 1].max() < 0.3
+
+    result = CliRunner().invoke(main, ["import-bvh", str(CMU_CLIP), "-o", str(out), "--frames",
+                                       "0:8", "--json", "--no-mesh"])  # fmt: skip
+    assert result.exit_code == 0, result.output
+    assert '"frames": 8' in result.stdout and '"left_collar": "LeftCollar"' in result.stdout
+
+
+def _truncated(tmp: Path) -> Path:
+    lines = CMU_CLIP.read_text().splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith("Frame Time"))
+    return write(tmp / "truncated.bvh", "\n".join(lines[: start + 11]) + "\n0.1 0.2")
+
+
+def _binary(tmp: Path) -> Path:
+    (tmp / "bin.bvh").write_bytes(bytes(range(256)))
+    return tmp / "bin.bvh"
+
+
+def _armless(tmp: Path) -> Path:
+    joints = [j for j in cmu_skeleton() if not j.name.startswith("Left")
+              or j.name.startswith(("LeftUp", "LeftLeg", "LeftFoot", "LeftToe"))]  # fmt: skip
+    return write(tmp / "armless.bvh", bvh_text(joints, {}, np.zeros((2, 3))))
+
+
+@pytest.mark.parametrize(
+    ("make", "expected"),
+    [
+        (lambda t: write(t / "notes.bvh", "hello, not a capture\n"), "not a BVH file"),
+        (_binary, "not a BVH file"),
+        (lambda t: write(t / "empty.bvh", ""), "not a BVH file"),
+        (_truncated, "truncated MOTION section"),
+        (_armless, "lacks SMPL joints: left_shoulder, left_elbow, left_wrist"),
+        (lambda t: write(t / "open.bvh", "HIERARCHY\nROOT Hips\n{\n OFFSET 0 0 0\n"),
+         "no MOTION section"),
+        (lambda t: write(t / "open2.bvh", "HIERARCHY\nROOT Hips\n{\nOFFSET 0 0 0\nMOTION\n"),
+         "HIERARCHY is incomplete"),
+        (lambda t: write(t / "zero.bvh", bvh_text(cmu_skeleton(), {}, np.zeros((1, 3)))
+                         .replace("Frame Time: 0.008333", "Frame Time: 0")),
+         "Frame Time must be positive"),
+        (lambda t: write(t / "nan.bvh", bvh_text(cmu_skeleton(), {}, np.full((2, 3), np.nan))),
+         "NaN"),
+        (lambda t: t / "missing.bvh", "missing.bvh: no such file"),
+    ],
+    ids=["text", "binary", "empty", "truncated", "armless", "no-motion", "open-hierarchy",
+         "zero-frame-time",
+         "nan", "missing"],
+)  # fmt: skip
+def test_bad_input_gives_one_line_and_no_output(
+    tmp_path: Path, make: Callable[[Path], Path], expected: str
+) -> None:
+    source = make(tmp_path)
+    before = sorted(tmp_path.iterdir())
+    result = CliRunner().invoke(main, ["import-bvh", str(source), "-o", str(tmp_path / "b.usda")])
+    assert result.exit_code == 1
+    message = result.stderr.strip()
+    assert message.startswith("Error:") and "\n" not in message, message
+    assert expected in message, message
+    assert sorted(tmp_path.iterdir()) == before  # no output, no temporary file left
+
+
+@pytest.mark.parametrize(
+    ("extra", "expected"),
+    [
+        (["-o", "{dir}/b.obj"], "must end in one of"),
+        (["-o", "{dir}/none/b.usda"], "does not exist"),
+        (["-o", "{dir}/b.usda", "--frames", "50:999"], "outside the file's 0:60"),
+    ],
+)
+def test_bad_arguments(tmp_path: Path, extra: list[str], expected: str) -> None:
+    lines = CMU_CLIP.read_text().splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith("Frames:"))
+    lines[start] = "Frames: 60"
+    source = write(tmp_path / "short.bvh", "\n".join(lines[: start + 62]) + "\n")
+    before = sorted(tmp_path.iterdir())
+    args = ["import-bvh", str(source)] + [a.format(dir=tmp_path) for a in extra]
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 1
+    message = result.stderr.strip()
+    assert message.startswith("Error:") and "\n" not in message and expected in message, message
+    assert sorted(tmp_path.iterdir()) == before
