@@ -203,6 +203,20 @@ def test_joint_mapping_by_name_and_structure(body_model: BodyModel) -> None:
     assert mixamo["spine1"] == "mixamorig:Spine" and mixamo["spine3"] == "mixamorig:Spine2"
     assert mixamo["left_collar"] == "mixamorig:LeftShoulder"
     assert mixamo["left_hand"] == "mixamorig:LeftHandMiddle1" and len(mixamo) == 24
+    # SMPL names (L_Shoulder is the shoulder, L_Foot the toe, L_Hand the hand)
+    smpl_names = {"Hips": "Pelvis", "Spine": "Spine1", "Spine1": "Spine2", "Spine2": "Spine3",
+                  "Neck": "Neck", "Head": "Head"}  # fmt: skip
+    for side in ("Left", "Right"):
+        for mixamo_name, smpl_name in (("UpLeg", "Hip"), ("Leg", "Knee"), ("Foot", "Ankle"),
+                                       ("ToeBase", "Foot"), ("Shoulder", "Collar"),
+                                       ("Arm", "Shoulder"), ("ForeArm", "Elbow"),
+                                       ("Hand", "Wrist"), ("HandMiddle1", "Hand")):  # fmt: skip
+            smpl_names[side + mixamo_name] = f"{side[0]}_{smpl_name}"
+    text = mixamo_text
+    for old, new in sorted(smpl_names.items(), key=lambda kv: -len(kv[0])):
+        text = text.replace(f"mixamorig:{old}\n", f"m_avg_{new}\n")
+    smpl = mapped_names(parse_bvh(text).skeleton)
+    assert smpl == {n: f"m_avg_{smpl_names[m.split(':')[1]]}" for n, m in mixamo.items()}
     # the real CMU files name the collar LeftCollar and the shoulder LeftShoulder
     real = mapped_names(read_bvh(CMU_CLIP).skeleton)
     assert real["left_collar"] == "LeftCollar" and real["left_shoulder"] == "LeftShoulder"
