@@ -267,6 +267,13 @@ def test_t_pose_rig_maps_to_the_zero_pose(body_model: BodyModel, tmp_path: Path)
     assert not info.unmapped and motion.fps == 120.0
     np.testing.assert_allclose(motion.pose, 0.0, atol=1e-5)
     np.testing.assert_allclose(motion.trans, [[0.0, 1.2, 0.0]] * 3, atol=1e-5)
+    # the same rig facing -Z: the root turns 180° about Y, no joint twists
+    flip = np.diag([-1.0, 1.0, -1.0])
+    turned = [Joint(j.name, j.parent, tuple(flip @ j.offset), j.order, j.end)
+              for j in mixamo_skeleton(rest)]  # fmt: skip
+    motion, _ = retarget(parse_bvh(bvh_text(turned, {}, hips[None])), body_model)
+    np.testing.assert_allclose(np.abs(motion.pose[0, 0]), [0.0, np.pi, 0.0], atol=1e-5)
+    np.testing.assert_allclose(motion.pose[0, 1:], 0.0, atol=1e-5)
     # floor "body": the T-posed body stands on y = 0
     motion, info = load_bvh(path, body_model)
     with torch.no_grad():

@@ -17,7 +17,8 @@ Retargeting works on world (global) rotations, so BVH joints that SMPL lacks (CM
    next mapped joint) times a rest correction ``C_j``: the rotation that takes SMPL's rest bone
    direction (child joint − joint, in the body's T-pose) to the BVH's rest bone direction (from
    the OFFSETs): the shortest arc for one child; for several (pelvis, chest), the primary bone
-   exactly and the others, least-squares, fixing the twist about it. So
+   exactly and the others, least-squares, fixing the twist about it; each fitted after the
+   SMPL parent's correction, so a rig's overall turn carries down the chain. So
    ``G_smpl = G_bvh · C_j``, and SMPL's bones point along the BVH's in any pose.
 3. SMPL local rotations follow in SMPL's hierarchy, ``R_local = G_parent^T · G``; SMPL joints
    without a BVH counterpart get the identity.
@@ -736,16 +737,19 @@ def _plan(
                 continue
             bvh_dirs.append(d_bvh / np.linalg.norm(d_bvh))
             smpl_dirs.append(d_smpl / np.linalg.norm(d_smpl))
+        # start from the parent's correction, so that a rig turned as a whole (facing -Z, a
+        # limb's rest twist) keeps that turn down the chain instead of a shortest arc's twist
+        parent = _mapped_ancestor(mapping, j)
+        base = corrections[parent] if parent is not None else np.eye(3)
         if bvh_dirs:
             # the first (primary) bone exactly, the others fix the twist about it
             weights = np.ones(len(bvh_dirs))
             if len(bvh_dirs) > 1:
                 weights[0] = np.inf
-            fit, _ = Rotation.align_vectors(bvh_dirs, smpl_dirs, weights=weights)
-            corrections[j] = fit.as_matrix()
+            fit, _ = Rotation.align_vectors(bvh_dirs, np.asarray(smpl_dirs) @ base.T, weights)
+            corrections[j] = fit.as_matrix() @ base
         else:
-            parent = _mapped_ancestor(mapping, j)
-            corrections[j] = corrections[parent] if parent is not None else np.eye(3)
+            corrections[j] = base
     return _Retarget(drivers, corrections)
 
 
