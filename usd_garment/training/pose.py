@@ -1,0 +1,205 @@
+"""Training the pose codec (the learned 10-d pose code of the motion descriptor): an autoencoder
+of SMPL poses fitted by the mean squared error of the 207 pose features (R − I of joints 1..23),
+with per-epoch validation on a held-out share of the poses, checkpoints and resume."""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from usd_garment.atomic import atomic_output
+from usd_garment.regressor.pose_code import PoseCodec, features_to_rotations, pose_to_features
+
+#: ``progress(epoch, total, row)``: called after each epoch (1-based) with its history row.
+EpochProgress = Callable[[int, int, dict[str, Any]], None]
+#: Tag of a pose codec checkpoint file.
+CHECKPOINT_FORMAT = "usd_garment.pose_codec_checkpoint"
+#: Poses evaluated at once in validation.
+_EVAL_CHUNK = 4096
+
+
+@dataclass
+class PoseCodecTrainConfig:
+    """Settings of a pose codec training.
+
+    Attributes:
+        hidden: width of the encoder's and decoder's hidden layer (500 in the paper's code).
+        code_size: entries of the pose code (10 in the paper).
+        epochs: passes over the training poses.
+        batch_size: poses per optimiser step.
+        lr: Adam learning rate of the first epoch ...
+        lr_decay: ... multiplied by this after every epoch.
+        validation_fraction: share of the poses held out for validation (none if 0 or if fewer
+            than 2 poses).
+        seed: seed of the initial weights, the split and the shuffles.
+        device: torch device of the training.
+    """
+
+    hidden: int = 500
+    code_size: int = 10
+    epochs: int = 100
+    batch_size: int = 256
+    lr: float = 1e-3
+    lr_decay: float = 1.0
+    validation_fraction: float = 0.1
+    seed: int = 0
+    device: str = "cpu"
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any]) -> PoseCodecTrainConfig:
+        """The config of ``asdict(config)`` or its JSON (unknown keys raise ``TypeError``)."""
+        return cls(**values)
+
+
+@torch.no_grad()
+def evaluate_pose_codec(codec: PoseCodec, poses: torch.Tensor | np.ndarray) -> dict[str, float]:
+    """Reconstruction errors of ``codec`` on poses ``(M, 24, 3)`` (axis-angle, rad; root ignored).
+
+    Returns:
+        ``feature_mse``: mean squared error of the 207 pose features; ``angle_deg``: mean
+        geodesic angle (degrees) between each joint's rotation (1..23) and its reconstruction
+        (decoded features projected onto rotations).
+    """
+    device = next(codec.parameters()).device
+    poses = torch.as_tensor(poses, dtype=torch.float32, device=device)
+    sq, angle, count = 0.0, 0.0, 0
+    for chunk in poses.split(_EVAL_CHUNK):
+        features = pose_to_features(chunk)
+        decoded = codec.decode(codec.encode_features(features))
+        sq += float((decoded - features).square().mean(-1).sum())
+        eye = torch.eye(3, dtype=features.dtype, device=device)
+        target = features.reshape(-1, 23, 3, 3) + eye
+        cos = ((features_to_rotations(decoded) * target).sum((-1, -2)) - 1.0) / 2.0
+        angle += float(torch.rad2deg(torch.arccos(cos.clamp(-1.0, 1.0))).mean(-1).sum())
+        count += chunk.shape[0]
+    count = max(count, 1)
+    return {"feature_mse": sq / count, "angle_deg": angle / count}
+
+
+def _save(path: Path, payload: dict[str, Any]) -> None:
+    with atomic_output(path) as tmp:
+        torch.save(payload, tmp)
+
+
+def train_pose_codec(
+    poses: np.ndarray | torch.Tensor,
+    config: PoseCodecTrainConfig | None = None,
+    progress: EpochProgress | None = None,
+    checkpoint: str | Path | None = None,
+    resume: bool = False,
+) -> tuple[PoseCodec, dict[str, Any]]:
+    """Fit a :class:`PoseCodec` to poses.
+
+    Args:
+        poses: ``(M, 24, 3)`` local axis-angle rotations (rad), SMPL order; the root is ignored.
+        config: training settings (defaults if None).
+        progress: called after every epoch.
+        checkpoint: file written after every epoch (``torch.save`` of the model, its config,
+            the optimiser, the epoch, the history, the training config and the random state).
+        resume: continue from ``checkpoint`` if that file exists (up to ``config.epochs``; the
+            remaining epochs then match an uninterrupted run).
+
+    Returns:
+        The codec (in eval mode, on ``config.device``) and the history (JSON-able): ``config``,
+        ``model``, ``train_poses``, ``validation_poses`` and ``epochs``, one row per epoch with
+        ``epoch`` (1-based), ``lr``, ``train_mse`` (mean over the epoch's batches), ``val_mse``
+        and ``val_angle_deg`` (when there is a validation share) and ``seconds``.
+
+    The same data and config give the same result on the CPU (seeded weights and draws; the
+    global torch random state is left alone); CUDA kernels may not be bitwise deterministic.
+
+    Raises:
+        ValueError: bad poses, or a checkpoint of another kind or model shape.
+    """
+    config = config or PoseCodecTrainConfig()
+    poses = torch.as_tensor(np.asarray(poses), dtype=torch.float32)
+    if poses.ndim != 3 or poses.shape[1:] != (24, 3) or poses.shape[0] == 0:
+        raise ValueError(f"poses must be (M, 24, 3) with M > 0, got {tuple(poses.shape)}")
+    device = torch.device(config.device)
+    generator = torch.Generator().manual_seed(config.seed)
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(config.seed)
+        codec = PoseCodec(config.hidden, config.code_size)
+    codec.to(device)
+    optimizer = torch.optim.Adam(codec.parameters(), lr=config.lr)
+
+    m = poses.shape[0]
+    order = torch.randperm(m, generator=generator)
+    n_val = math.ceil(config.validation_fraction * m) if m >= 2 else 0
+    n_val = min(n_val, m - 1)
+    val_poses = poses[order[:n_val]]
+    train_features = pose_to_features(poses[order[n_val:]]).to(device)
+
+    history: dict[str, Any] = {
+        "config": asdict(config),
+        "model": codec.config(),
+        "train_poses": int(train_features.shape[0]),
+        "validation_poses": int(n_val),
+        "epochs": [],
+    }
+    start = 0
+    path = Path(checkpoint) if checkpoint is not None else None
+    if resume and path is not None and path.is_file():
+        state = torch.load(path, map_location=device, weights_only=True)
+        if state.get("format") != CHECKPOINT_FORMAT:
+            raise ValueError(f"{path}: not a pose codec checkpoint")
+        if state["model_config"] != codec.config():
+            raise ValueError(
+                f"{path}: checkpoint model {state['model_config']} differs from {codec.config()}"
+            )
+        codec.load_state_dict(state["model"])
+        optimizer.load_state_dict(state["optimizer"])
+        generator.set_state(state["generator"])
+        start = int(state["epoch"])
+        history["epochs"] = list(state["history"]["epochs"])
+
+    n = train_features.shape[0]
+    for epoch in range(start, config.epochs):
+        tic = time.perf_counter()
+        lr = config.lr * config.lr_decay**epoch
+        for group in optimizer.param_groups:
+            group["lr"] = lr
+        codec.train()
+        perm = torch.randperm(n, generator=generator).to(device)
+        total, batches = 0.0, 0
+        for idx in perm.split(config.batch_size):
+            features = train_features[idx]
+            loss = (codec.decode(codec.encode_features(features)) - features).square().mean()
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            optimizer.step()
+            total += float(loss.detach())
+            batches += 1
+        codec.eval()
+        row: dict[str, Any] = {"epoch": epoch + 1, "lr": lr, "train_mse": total / max(batches, 1)}
+        if n_val:
+            errors = evaluate_pose_codec(codec, val_poses)
+            row["val_mse"] = errors["feature_mse"]
+            row["val_angle_deg"] = errors["angle_deg"]
+        row["seconds"] = time.perf_counter() - tic
+        history["epochs"].append(row)
+        if path is not None:
+            _save(
+                path,
+                {
+                    "format": CHECKPOINT_FORMAT,
+                    "model_config": codec.config(),
+                    "model": codec.state_dict(),
+                    "optimizer": optimizer.state_dict(),
+                    "epoch": epoch + 1,
+                    "history": history,
+                    "config": asdict(config),
+                    "generator": generator.get_state(),
+                },
+            )
+        if progress is not None:
+            progress(epoch + 1, config.epochs, row)
+    codec.eval()
+    return codec, history

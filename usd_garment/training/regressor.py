@@ -1,0 +1,438 @@
+"""Training the recurrent garment regressor R(β, γ) of the paper's section 4 on a canonical
+training set: the targets are the latent codes z of the canonical garments (the VAE encoder's
+mean, given by the caller), the inputs the motion descriptor γ of each sequence at the model's
+30 fps and its body shape β; the loss is L_pos + ρ1·L_vel + ρ2·L_acc, L1 on z and on its
+per-frame first and second differences, over random crops of the training sequences."""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from usd_garment.atomic import atomic_output
+from usd_garment.canonical.dataset import CanonicalSet
+from usd_garment.motion.resample import resample_motion
+from usd_garment.motion.sequence import SmplMotion
+from usd_garment.regressor.descriptor import MODEL_FPS, descriptor_size, motion_descriptor
+from usd_garment.regressor.gru import GarmentRegressor
+from usd_garment.regressor.pose_code import PoseCodec
+
+#: ``progress(epoch, total, row)``: called after each epoch (1-based) with its history row.
+EpochProgress = Callable[[int, int, dict[str, Any]], None]
+#: ``encode_latent(X (B, N, 3)) -> z (B, latent)``: the VAE encoder's mean of canonical garments.
+EncodeLatent = Callable[[torch.Tensor], torch.Tensor]
+#: ``decode(z (T, latent)) -> X (T, N, 3)``: the VAE decoder, canonical garments in metres.
+DecodeLatent = Callable[[torch.Tensor], torch.Tensor]
+#: Tag of a regressor checkpoint file.
+CHECKPOINT_FORMAT = "usd_garment.regressor_checkpoint"
+
+
+@dataclass
+class RegressorTrainConfig:
+    """Settings of a regressor training.
+
+    Attributes:
+        hidden: sizes of the GRU layers (500, 500 in the paper's code).
+        crop_length: frames (at 30 fps) of each training crop; shorter sequences are used whole,
+            padded and masked.
+        batch_size: crops per optimiser step.
+        crops_per_epoch: crops drawn per epoch; None: as many as fill the training frames once
+            (total frames / crop_length, at least one batch).
+        epochs: training epochs.
+        lr: Adam learning rate of the first epoch ...
+        lr_decay: ... multiplied by this after every epoch.
+        rho1: weight ρ1 of L_vel (L1 of per-frame first differences of z).
+        rho2: weight ρ2 of L_acc (L1 of per-frame second differences of z).
+        grad_clip: largest gradient norm (None: no clipping).
+        padding: first frames' derivatives in γ (``"repeat"`` or ``"zeros"``).
+        encode_batch: frames per call of ``encode_latent`` and ``decode``.
+        seed: seed of the initial weights and of the crops.
+        device: torch device of the training (``encode_latent``/``decode`` get tensors there).
+    """
+
+    hidden: tuple[int, ...] = (500, 500)
+    crop_length: int = 90
+    batch_size: int = 16
+    crops_per_epoch: int | None = None
+    epochs: int = 100
+    lr: float = 1e-3
+    lr_decay: float = 1.0
+    rho1: float = 1.0
+    rho2: float = 1.0
+    grad_clip: float | None = 1.0
+    padding: str = "repeat"
+    encode_batch: int = 256
+    seed: int = 0
+    device: str = "cpu"
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any]) -> RegressorTrainConfig:
+        """The config of ``asdict(config)`` or its JSON (unknown keys raise ``TypeError``)."""
+        values = dict(values)
+        if "hidden" in values:
+            values["hidden"] = tuple(int(h) for h in values["hidden"])
+        return cls(**values)
+
+
+@dataclass
+class RegressorSequence:
+    """One training or validation sequence at the model's frame rate.
+
+    Attributes:
+        gamma: ``(T, 42)`` motion descriptor.
+        betas: ``(10,)`` body shape.
+        latent: ``(T, latent)`` target latent codes z.
+        canonical: ``(T, N, 3)`` canonical garments (m), kept for validation sequences only.
+    """
+
+    gamma: torch.Tensor
+    betas: torch.Tensor
+    latent: torch.Tensor
+    canonical: torch.Tensor | None = None
+
+    @property
+    def num_frames(self) -> int:
+        return int(self.gamma.shape[0])
+
+
+def resample_frames(values: np.ndarray, fps: float, target_fps: float) -> np.ndarray:
+    """Per-frame arrays ``(T, ...)`` linearly interpolated at the frames ``resample_motion``
+    gives for a motion of ``T`` frames at ``fps`` resampled to ``target_fps``."""
+    t = values.shape[0]
+    if t == 1 or np.isclose(fps, target_fps):
+        return values
+    duration = (t - 1) / fps
+    count = int(np.floor(duration * target_fps + 1e-6)) + 1
+    u = np.arange(count) / target_fps * fps
+    i0 = np.minimum(np.floor(u).astype(int), t - 2)
+    alpha = (u - i0).reshape(-1, *([1] * (values.ndim - 1)))
+    out = (1.0 - alpha) * values[i0] + alpha * values[i0 + 1]
+    return out.astype(values.dtype)
+
+
+@torch.no_grad()
+def prepare_sequence(
+    data: CanonicalSet,
+    s: int,
+    encode_latent: EncodeLatent,
+    codec: PoseCodec,
+    config: RegressorTrainConfig,
+    keep_canonical: bool = False,
+) -> RegressorSequence:
+    """γ, β and latent targets of sequence ``s`` of ``data``, resampled to :data:`MODEL_FPS`
+    (pose by slerp, translation and canonical garments linearly) if its fps differs."""
+    device = torch.device(config.device)
+    frames = data.sequence(s)
+    fps = float(data.fps[s])
+    betas = np.asarray(data.betas[s], dtype=np.float32)
+    motion = SmplMotion(
+        betas=betas,
+        pose=np.asarray(data.pose[frames], dtype=np.float32),
+        trans=np.asarray(data.trans[frames], dtype=np.float32),
+        fps=fps,
+    )
+    motion = resample_motion(motion, MODEL_FPS)
+    canonical = resample_frames(
+        np.asarray(data.canonical[frames], dtype=np.float32), fps, MODEL_FPS
+    )
+    gamma = motion_descriptor(motion.pose, motion.trans, codec, MODEL_FPS, config.padding)
+    x = torch.as_tensor(canonical, dtype=torch.float32)
+    latent = torch.cat(
+        [
+            torch.as_tensor(encode_latent(chunk.to(device))).to(device, torch.float32)
+            for chunk in x.split(max(1, config.encode_batch))
+        ]
+    )
+    return RegressorSequence(
+        gamma=gamma.to(device),
+        betas=torch.as_tensor(betas, device=device),
+        latent=latent,
+        canonical=x if keep_canonical else None,
+    )
+
+
+def latent_losses(
+    pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None = None
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The paper's L_pos, L_vel and L_acc: mean absolute error of z ``(B, T, D)``, of its
+    per-frame first differences and of its second differences (differences in latent units per
+    frame, not per second), over the frames ``mask (B, T)`` marks valid (all if None)."""
+    if mask is None:
+        mask = pred.new_ones(pred.shape[:2])
+    mask = mask.to(pred.dtype)
+    d = pred.shape[-1]
+
+    def _l1(a: torch.Tensor, b: torch.Tensor, m: torch.Tensor) -> torch.Tensor:
+        return ((a - b).abs().sum(-1) * m).sum() / (m.sum() * d).clamp_min(1.0)
+
+    err_pos = _l1(pred, target, mask)
+    dp, dt = pred[:, 1:] - pred[:, :-1], target[:, 1:] - target[:, :-1]
+    mv = mask[:, 1:] * mask[:, :-1]
+    err_vel = _l1(dp, dt, mv)
+    ma = mv[:, 1:] * mv[:, :-1]
+    err_acc = _l1(dp[:, 1:] - dp[:, :-1], dt[:, 1:] - dt[:, :-1], ma)
+    return err_pos, err_vel, err_acc
+
+
+def _normalization(
+    sequences: list[RegressorSequence],
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Mean and deviation of ``[γ, β]`` per frame and of z over the training frames."""
+    inputs = torch.cat(
+        [torch.cat([q.gamma, q.betas.expand(q.num_frames, -1)], dim=-1) for q in sequences]
+    ).double()
+    latent = torch.cat([q.latent for q in sequences]).double()
+    return (
+        inputs.mean(0).float(),
+        inputs.std(0, correction=0).float(),
+        latent.mean(0).float(),
+        latent.std(0, correction=0).float(),
+    )
+
+
+def _batch(
+    sequences: list[RegressorSequence],
+    picks: list[tuple[int, int]],
+    length: int,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Crops ``(B, L, ·)`` of γ and z, the betas ``(B, 10)`` and the valid-frame mask ``(B, L)``."""
+    first = sequences[0]
+    b = len(picks)
+    gamma = first.gamma.new_zeros((b, length, first.gamma.shape[-1]))
+    latent = first.latent.new_zeros((b, length, first.latent.shape[-1]))
+    mask = first.gamma.new_zeros((b, length))
+    betas = torch.stack([sequences[s].betas for s, _ in picks])
+    for i, (s, start) in enumerate(picks):
+        q = sequences[s]
+        n = min(length, q.num_frames - start)
+        gamma[i, :n] = q.gamma[start : start + n]
+        latent[i, :n] = q.latent[start : start + n]
+        mask[i, :n] = 1.0
+    return gamma, betas, latent, mask
+
+
+@torch.no_grad()
+def evaluate_regressor(
+    model: GarmentRegressor,
+    sequences: list[RegressorSequence],
+    decode: DecodeLatent | None = None,
+    decode_batch: int = 256,
+) -> dict[str, float]:
+    """Errors of ``model`` run from rest over each whole sequence.
+
+    Returns:
+        ``pos``, ``vel``, ``acc``: the latent L1 losses averaged over the sequences' frames
+        (weighted by their frame counts); with ``decode`` and the sequences' canonical garments,
+        ``vertex_mm``: mean distance (mm) between decoded predicted and true canonical vertices.
+    """
+    sums = {"pos": 0.0, "vel": 0.0, "acc": 0.0}
+    frames = 0
+    vertex_sum, vertex_count = 0.0, 0
+    for q in sequences:
+        pred = model.predict(q.gamma, q.betas)
+        losses = latent_losses(pred[None], q.latent[None])
+        for key, value in zip(sums, losses, strict=True):
+            sums[key] += float(value) * q.num_frames
+        frames += q.num_frames
+        if decode is not None and q.canonical is not None:
+            for z, x in zip(pred.split(decode_batch), q.canonical.split(decode_batch), strict=True):
+                decoded = torch.as_tensor(decode(z)).to("cpu", torch.float32)
+                vertex_sum += float((decoded - x).norm(dim=-1).sum())
+                vertex_count += x.shape[0] * x.shape[1]
+    out = {key: value / max(frames, 1) for key, value in sums.items()}
+    if vertex_count:
+        out["vertex_mm"] = 1000.0 * vertex_sum / vertex_count
+    return out
+
+
+@torch.no_grad()
+def _decoder_floor_mm(
+    sequences: list[RegressorSequence], decode: DecodeLatent, decode_batch: int
+) -> float:
+    """Mean vertex distance (mm) of the decoded target latents to the true canonical garments:
+    the error a perfect regressor would have."""
+    total, count = 0.0, 0
+    for q in sequences:
+        assert q.canonical is not None
+        for z, x in zip(q.latent.split(decode_batch), q.canonical.split(decode_batch), strict=True):
+            decoded = torch.as_tensor(decode(z)).to("cpu", torch.float32)
+            total += float((decoded - x).norm(dim=-1).sum())
+            count += x.shape[0] * x.shape[1]
+    return 1000.0 * total / max(count, 1)
+
+
+def _save(path: Path, payload: dict[str, Any]) -> None:
+    with atomic_output(path) as tmp:
+        torch.save(payload, tmp)
+
+
+def train_regressor(
+    data: CanonicalSet,
+    encode_latent: EncodeLatent,
+    codec: PoseCodec,
+    config: RegressorTrainConfig | None = None,
+    *,
+    decode: DecodeLatent | None = None,
+    progress: EpochProgress | None = None,
+    checkpoint: str | Path | None = None,
+    resume: bool = False,
+) -> tuple[GarmentRegressor, dict[str, Any]]:
+    """Fit a :class:`GarmentRegressor` to the ``train`` sequences of a canonical training set.
+
+    Args:
+        data: the canonical training set (sequences with splits ``train`` and ``validation``).
+        encode_latent: maps canonical garments ``(B, N, 3)`` (m, float32, on ``config.device``)
+            to their latent codes ``(B, latent)``: the VAE encoder's mean. Called without grad.
+        codec: the trained pose codec of γ.
+        config: training settings (defaults if None).
+        decode: the VAE decoder ``z (T, latent) -> X (T, N, 3)``; given, validation also reports
+            the canonical vertex error in mm.
+        progress: called after every epoch.
+        checkpoint: file written after every epoch (``torch.save`` of the model, its config,
+            the optimiser, the epoch, the history, the training config and the random state).
+        resume: continue from ``checkpoint`` if that file exists (up to ``config.epochs``; the
+            remaining epochs then match an uninterrupted run).
+
+    Returns:
+        The regressor (eval mode, on ``config.device``, normalisation set from the training
+        frames) and the history (JSON-able): ``config``, ``model``, ``codec``, the sequence and
+        frame counts, ``decoder_floor_mm`` (the validation vertex error of the true latents when
+        ``decode`` is given) and ``epochs``, one row per epoch: ``epoch`` (1-based), ``lr``,
+        ``train_loss``, ``train_pos``, ``train_vel``, ``train_acc`` (means over the epoch's
+        batches), ``val_pos``, ``val_vel``, ``val_acc`` and ``val_vertex_mm`` (when there are
+        validation sequences, and a decoder for the last), ``seconds``.
+
+    The same data and config give the same result on the CPU (seeded weights and draws; the
+    global torch random state is left alone); CUDA kernels may not be bitwise deterministic.
+
+    Raises:
+        ValueError: no training sequences, a bad config, or a checkpoint of another kind or
+            model shape.
+    """
+    config = config or RegressorTrainConfig()
+    if config.crop_length < 3 or config.batch_size < 1:
+        raise ValueError("crop_length must be at least 3 and batch_size at least 1")
+    train_ids = data.split_sequences("train")
+    if not train_ids:
+        raise ValueError("the canonical set has no 'train' sequences")
+    val_ids = data.split_sequences("validation")
+    device = torch.device(config.device)
+    codec = codec.to(device).eval()
+
+    train = [prepare_sequence(data, s, encode_latent, codec, config) for s in train_ids]
+    keep = decode is not None
+    val = [prepare_sequence(data, s, encode_latent, codec, config, keep) for s in val_ids]
+    latent_size = int(train[0].latent.shape[-1])
+
+    generator = torch.Generator().manual_seed(config.seed)
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(config.seed)
+        model = GarmentRegressor(
+            descriptor_size(codec.code_size), config.hidden, latent_size, train[0].betas.numel()
+        )
+    model.to(device)
+    model.set_normalization(*_normalization(train))
+    optimizer = torch.optim.Adam(model.parameters(), lr=config.lr)
+
+    lengths = [q.num_frames for q in train]
+    total_frames = sum(lengths)
+    history: dict[str, Any] = {
+        "config": asdict(config),
+        "model": model.config(),
+        "codec": codec.config(),
+        "train_sequences": len(train),
+        "train_frames": total_frames,
+        "validation_sequences": len(val),
+        "validation_frames": sum(q.num_frames for q in val),
+        "decoder_floor_mm": None,
+        "epochs": [],
+    }
+    start = 0
+    path = Path(checkpoint) if checkpoint is not None else None
+    if resume and path is not None and path.is_file():
+        state = torch.load(path, map_location=device, weights_only=True)
+        if state.get("format") != CHECKPOINT_FORMAT:
+            raise ValueError(f"{path}: not a regressor checkpoint")
+        if state["model_config"] != model.config():
+            raise ValueError(
+                f"{path}: checkpoint model {state['model_config']} differs from {model.config()}"
+            )
+        model.load_state_dict(state["model"])
+        optimizer.load_state_dict(state["optimizer"])
+        generator.set_state(state["generator"])
+        start = int(state["epoch"])
+        history["epochs"] = list(state["history"]["epochs"])
+        history["decoder_floor_mm"] = state["history"].get("decoder_floor_mm")
+    if decode is not None and val and history["decoder_floor_mm"] is None:
+        history["decoder_floor_mm"] = _decoder_floor_mm(val, decode, config.encode_batch)
+
+    length = config.crop_length
+    # sequences drawn in proportion to their crop starts: every start is equally likely
+    weights = torch.tensor([max(n - length + 1, 1) for n in lengths], dtype=torch.float64)
+    crops = config.crops_per_epoch or max(total_frames // length, config.batch_size)
+    steps = math.ceil(crops / config.batch_size)
+    for epoch in range(start, config.epochs):
+        tic = time.perf_counter()
+        lr = config.lr * config.lr_decay**epoch
+        for group in optimizer.param_groups:
+            group["lr"] = lr
+        model.train()
+        sums = np.zeros(4)
+        for step in range(steps):
+            b = min(config.batch_size, crops - step * config.batch_size)
+            seqs = torch.multinomial(weights, b, replacement=True, generator=generator).tolist()
+            u = torch.rand(b, generator=generator, dtype=torch.float64).tolist()
+            picks = [
+                (s, int(ui * max(lengths[s] - length + 1, 1)))
+                for s, ui in zip(seqs, u, strict=True)
+            ]
+            gamma, betas, target, mask = _batch(train, picks, length)
+            pred, _ = model(gamma, betas)
+            pos, vel, acc = latent_losses(pred, target, mask)
+            loss = pos + config.rho1 * vel + config.rho2 * acc
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            if config.grad_clip is not None:
+                torch.nn.utils.clip_grad_norm_(model.parameters(), config.grad_clip)
+            optimizer.step()
+            sums += [float(v.detach()) for v in (loss, pos, vel, acc)]
+        model.eval()
+        sums /= max(steps, 1)
+        row: dict[str, Any] = {
+            "epoch": epoch + 1,
+            "lr": lr,
+            "train_loss": float(sums[0]),
+            "train_pos": float(sums[1]),
+            "train_vel": float(sums[2]),
+            "train_acc": float(sums[3]),
+        }
+        if val:
+            errors = evaluate_regressor(model, val, decode, config.encode_batch)
+            row.update({f"val_{key}": value for key, value in errors.items()})
+        row["seconds"] = time.perf_counter() - tic
+        history["epochs"].append(row)
+        if path is not None:
+            _save(
+                path,
+                {
+                    "format": CHECKPOINT_FORMAT,
+                    "model_config": model.config(),
+                    "model": model.state_dict(),
+                    "optimizer": optimizer.state_dict(),
+                    "epoch": epoch + 1,
+                    "history": history,
+                    "config": asdict(config),
+                    "generator": generator.get_state(),
+                },
+            )
+        if progress is not None:
+            progress(epoch + 1, config.epochs, row)
+    model.eval()
+    return model, history
