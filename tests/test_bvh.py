@@ -430,6 +430,7 @@ def test_bad_input_gives_one_line_and_no_output(
         (["-o", "{dir}/b.obj"], "must end in one of"),
         (["-o", "{dir}/none/b.usda"], "does not exist"),
         (["-o", "{dir}/b.usda", "--frames", "50:999"], "outside the file's 0:60"),
+        (["-o", "{dir}/b.usda", "--betas", "1,9"], "outside the body's shape space"),
     ],
 )
 def test_bad_arguments(tmp_path: Path, extra: list[str], expected: str) -> None:

@@ -40,7 +40,7 @@ import numpy as np
 import torch
 from scipy.spatial.transform import Rotation
 
-from usd_garment.body.betas import as_betas
+from usd_garment.body.betas import MAX_ABS_BETA, as_betas
 from usd_garment.body.joints import NUM_JOINTS, SMPL_JOINT_NAMES, SMPL_PARENTS
 from usd_garment.body.model import BodyModel
 from usd_garment.motion.amass import ZUP_TO_YUP, rest_pelvis
@@ -786,7 +786,8 @@ def retarget(
     Args:
         clip: the parsed file.
         body: the SMPL-layout body whose rest T-pose the rest corrections aim at.
-        betas: shape coefficients (any length, cut or zero-padded to 10); zero by default.
+        betas: shape coefficients (any length, cut or zero-padded to 10, within
+            ``±MAX_ABS_BETA``); zero by default.
         units: a key of :data:`UNITS`, or ``"auto"`` (m, cm or mm by the skeleton's height).
         scale: metres per file unit; overrides ``units``.
         up_axis: ``"y"``, ``"z"`` or ``"auto"`` (the rest skeleton's hips→head axis).
@@ -799,7 +800,7 @@ def retarget(
 
     Raises:
         BvhError: a skeleton that does not map to SMPL, unknown units, axis or floor mode, a bad
-            scale or frame range.
+            scale, frame range or betas.
     """
     sk = clip.skeleton
     if floor not in FLOOR_MODES:
@@ -825,7 +826,10 @@ def retarget(
     else:
         raise BvhError(f"unknown units '{units}' (expected auto, {', '.join(UNITS)})")
 
-    betas64 = as_betas(np.zeros(0) if betas is None else betas)
+    try:
+        betas64 = as_betas(np.zeros(0) if betas is None else betas, max_abs=MAX_ABS_BETA)
+    except ValueError as exc:
+        raise BvhError(str(exc)) from None
     with torch.no_grad():
         _, smpl_rest_t = body.shaped(torch.as_tensor(betas64, dtype=torch.float32)[None])
     smpl_rest = smpl_rest_t[0].double().numpy()
