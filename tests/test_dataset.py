@@ -19,6 +19,7 @@ from usd_garment.dataset import (
     make_dataset,
     plan_sequences,
     read_manifest,
+    sequence_motion,
 )
 from usd_garment.methods.simulation import SimulationError
 from usd_garment.motion.procedural import make_motion
@@ -146,3 +147,15 @@ def test_a_captured_body_layer_is_simulated_whole(tmp_path: Path, body_model: Bo
     assert points.shape[0] == 4
     code, output = _run(["dataset", "make", "--capture", capture, "-o", tmp_path / "x"])
     assert code != 0 and "FILE:SPLIT" in output
+
+
+def test_a_bvh_capture_plays_whole_at_the_dataset_rate(body_model: BodyModel) -> None:
+    clip = Path(__file__).parents[2] / "shared" / "mocap" / "cmu_131_01.bvh"
+    if not clip.is_file():
+        pytest.skip("the shared CMU clips are not beside the project")
+    config = DatasetConfig(shapes=2, captures=((str(clip), "train"),), capture_shapes=2)
+    spec = [s for s in plan_sequences(config) if s.capture][1]
+    motion = sequence_motion(config, spec, body_model)
+    assert motion.fps == 30.0 and motion.num_frames == 249  # 995 frames at 120 fps
+    np.testing.assert_array_equal(motion.betas, np.asarray(spec.betas, dtype=np.float32))
+    np.testing.assert_array_equal(motion.time_codes, np.arange(249))
