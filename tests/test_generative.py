@@ -151,7 +151,8 @@ def test_official_decoder_size():
     with torch.device("meta"):
         basis = GarmentVAE(4405, encoder_hidden=(8,), decoder=DecoderConfig(basis_size=64))
     assert decoder_bytes(basis) < 4e6  # float32
-    assert decoder_bytes(basis, 2) == decoder_bytes(basis) // 2
+    statistics = 2 * 4405 * 3 * 4
+    assert decoder_bytes(basis, 2) - statistics == (decoder_bytes(basis) - statistics) // 2
 
 
 def test_config_round_trip(tmp_path, data):
@@ -173,6 +174,28 @@ def test_config_round_trip(tmp_path, data):
     assert VaeTrainConfig.from_dict(json.loads(json.dumps(train.to_dict()))) == train
     with pytest.raises(ValueError, match="decoder kind"):
         DecoderConfig(kind="pca")
+
+
+def test_decoder_only_files(tmp_path, data):
+    """What run time ships: the decoder and the statistics, optionally stored in float16."""
+    model = GarmentVAE(162, encoder_hidden=(64,), decoder=SMALL_DECODER)
+    model.set_statistics(torch.as_tensor(data.canonical))
+    z = torch.randn(4, 25, generator=torch.Generator().manual_seed(2))
+    save_vae(tmp_path / "full.pt", model)
+    save_vae(tmp_path / "dec.pt", model, encoder=False)
+    save_vae(tmp_path / "dec16.pt", model, encoder=False, dtype=torch.float16)
+    sizes = {name: (tmp_path / name).stat().st_size for name in ("full.pt", "dec.pt", "dec16.pt")}
+    assert sizes["dec16.pt"] < 0.6 * sizes["dec.pt"] < 0.6 * sizes["full.pt"]
+    decoder = load_vae(tmp_path / "dec.pt").model
+    assert decoder.encoder is None and decoder.config()["encoder_hidden"] is None
+    torch.testing.assert_close(decoder.decode(z), model.decode(z))
+    half = load_vae(tmp_path / "dec16.pt").model
+    assert half.mean.dtype == torch.float32
+    with torch.no_grad():
+        error = float((half.decode(z) - model.decode(z)).norm(dim=-1).max())
+    assert error < 2e-5, error  # m
+    with pytest.raises(RuntimeError, match="no encoder"):
+        decoder.encode(torch.as_tensor(data.canonical[:1]))
 
 
 def test_load_vae_refuses_other_files(tmp_path):

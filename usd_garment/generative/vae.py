@@ -30,6 +30,8 @@ DECODER_KINDS = ("mlp", "basis")
 STD_FLOOR = 1e-4
 #: Frames used, evenly spaced, for the principal-component start of a basis decoder.
 PCA_FRAMES = 1024
+#: Tensors ``save_vae`` always stores in float32: the per-vertex statistics (m).
+KEEP_FLOAT32 = ("mean", "std")
 #: Version of the file written by ``save_vae``.
 FORMAT_VERSION = 1
 
@@ -137,7 +139,7 @@ class GarmentVAE(nn.Module):
         latent_size: L (the paper's 25).
         encoder_hidden: widths of the encoder's hidden layers (its first layer, 3N × width, is
             most of its size; the encoder is needed for training and for encoding the regressor's
-            targets, not at run time).
+            targets, not at run time); None: a decoder-only model, whose ``encode`` raises.
         decoder: the decoder's architecture.
         layer_norm: LayerNorm after each hidden ReLU of the encoder.
 
@@ -149,19 +151,21 @@ class GarmentVAE(nn.Module):
         self,
         num_vertices: int,
         latent_size: int = LATENT_SIZE,
-        encoder_hidden: tuple[int, ...] = (256, 256),
+        encoder_hidden: tuple[int, ...] | None = (256, 256),
         decoder: DecoderConfig | None = None,
         layer_norm: bool = True,
     ) -> None:
         super().__init__()
         self.num_vertices = int(num_vertices)
         self.latent_size = int(latent_size)
-        self.encoder_hidden = tuple(int(h) for h in encoder_hidden)
+        self.encoder_hidden = None if encoder_hidden is None else tuple(map(int, encoder_hidden))
         self.layer_norm = bool(layer_norm)
         self.decoder_config = decoder if decoder is not None else DecoderConfig()
-        self.encoder = GarmentEncoder(
-            self.num_vertices, self.latent_size, self.encoder_hidden, self.layer_norm
-        )
+        self.encoder: GarmentEncoder | None = None
+        if self.encoder_hidden is not None:
+            self.encoder = GarmentEncoder(
+                self.num_vertices, self.latent_size, self.encoder_hidden, self.layer_norm
+            )
         self.decoder = GarmentDecoder(self.num_vertices, self.latent_size, self.decoder_config)
         self.register_buffer("mean", torch.zeros(self.num_vertices, 3))
         self.register_buffer("std", torch.ones(self.num_vertices, 3))
@@ -174,7 +178,7 @@ class GarmentVAE(nn.Module):
         return {
             "num_vertices": self.num_vertices,
             "latent_size": self.latent_size,
-            "encoder_hidden": list(self.encoder_hidden),
+            "encoder_hidden": None if self.encoder_hidden is None else list(self.encoder_hidden),
             "layer_norm": self.layer_norm,
             "decoder": self.decoder_config.to_dict(),
         }
@@ -185,7 +189,7 @@ class GarmentVAE(nn.Module):
         return cls(
             num_vertices=config["num_vertices"],
             latent_size=config["latent_size"],
-            encoder_hidden=tuple(config["encoder_hidden"]),
+            encoder_hidden=config["encoder_hidden"],
             decoder=DecoderConfig.from_dict(config["decoder"]),
             layer_norm=config.get("layer_norm", True),
         )
@@ -225,8 +229,22 @@ class GarmentVAE(nn.Module):
     # -- networks -------------------------------------------------------------------------
 
     def encode(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """E: garments ``x`` ``(B, N, 3)`` (m) → μ ``(B, L)``, log σ² ``(B, L)``."""
+        """E: garments ``x`` ``(B, N, 3)`` (m) → μ ``(B, L)``, log σ² ``(B, L)``.
+
+        Raises:
+            RuntimeError: a decoder-only model.
+        """
+        if self.encoder is None:
+            raise RuntimeError("this garment VAE has no encoder (stored decoder-only)")
         return self.encoder(self.normalise(x).flatten(-2))
+
+    def decoder_only(self) -> GarmentVAE:
+        """A copy without the encoder (what the stage processor needs), sharing nothing."""
+        config = self.config() | {"encoder_hidden": None}
+        out = GarmentVAE.from_config(config).to(self.mean.device)
+        state = {k: v for k, v in self.state_dict().items() if not k.startswith("encoder.")}
+        out.load_state_dict(state)
+        return out.train(self.training)
 
     def decode(self, z: torch.Tensor) -> torch.Tensor:
         """D: latent codes ``z`` ``(B, L)`` → garments ``(B, N, 3)`` (m)."""
@@ -260,11 +278,11 @@ def num_parameters(module: nn.Module) -> int:
 
 
 def decoder_bytes(model: GarmentVAE, bytes_per_value: int = 4) -> int:
-    """Size of what decoding needs (decoder parameters plus ``mean`` and ``std``) stored at
-    ``bytes_per_value`` (4: float32, 2: float16)."""
-    return (num_parameters(model.decoder) + model.mean.numel() + model.std.numel()) * (
-        bytes_per_value
-    )
+    """Size of what decoding needs, as ``save_vae(..., encoder=False)`` stores it: the decoder's
+    parameters at ``bytes_per_value`` (4: float32, 2: float16) plus ``mean`` and ``std`` in
+    float32."""
+    statistics = model.mean.numel() + model.std.numel()
+    return num_parameters(model.decoder) * bytes_per_value + 4 * statistics
 
 
 @dataclass
@@ -276,13 +294,32 @@ class VaeFile:
     metadata: dict[str, Any] = field(default_factory=dict)
 
 
-def save_vae(path: str | Path, model: GarmentVAE, metadata: dict[str, Any] | None = None) -> None:
+def save_vae(
+    path: str | Path,
+    model: GarmentVAE,
+    metadata: dict[str, Any] | None = None,
+    *,
+    encoder: bool = True,
+    dtype: torch.dtype = torch.float32,
+) -> None:
     """Write ``model`` (architecture, weights, statistics) and ``metadata`` to ``path``
-    atomically (``torch.save`` of tensors, lists and numbers only)."""
+    atomically (``torch.save`` of tensors, lists and numbers only).
+
+    Args:
+        encoder: keep the encoder; False writes a decoder-only model (what run time needs).
+        dtype: storage type of the weights (``torch.float16`` halves the file; the statistics
+            stay float32, as float16 would round positions by up to 0.1 mm; ``load_vae``
+            computes in float32 either way).
+    """
+    if not encoder and model.encoder is not None:
+        model = model.decoder_only()
     payload = {
         "format": FORMAT_VERSION,
         "config": model.config(),
-        "state": {k: v.detach().cpu() for k, v in model.state_dict().items()},
+        "state": {
+            k: v.detach().cpu().to(dtype) if k not in KEEP_FLOAT32 else v.detach().cpu()
+            for k, v in model.state_dict().items()
+        },
         "metadata": metadata or {},
     }
     with atomic_output(path) as tmp:
@@ -290,7 +327,7 @@ def save_vae(path: str | Path, model: GarmentVAE, metadata: dict[str, Any] | Non
 
 
 def load_vae(path: str | Path, map_location: str | torch.device = "cpu") -> VaeFile:
-    """Read a file written by ``save_vae``; the model is in evaluation mode.
+    """Read a file written by ``save_vae``; the model is float32, in evaluation mode.
 
     Raises:
         FileNotFoundError: no such file.
