@@ -21,6 +21,7 @@ from usd_garment.cli.options import (
 from usd_garment.dress import dress as dress_stage
 from usd_garment.garment.template import GARMENT_NAMES
 from usd_garment.methods import available_methods
+from usd_garment.methods.learned import LearnedMethod, default_method
 
 
 @click.command("dress")
@@ -40,9 +41,15 @@ from usd_garment.methods import available_methods
 )
 @click.option(
     "--method",
-    default="lbs",
-    show_default=True,
-    help=f"Garment method: {', '.join(available_methods())}.",
+    default=None,
+    help=f"Garment method: {', '.join(available_methods())}. Default: learned, with the "
+    "shipped model of the garment (lbs+postprocess for a garment without one).",
+)
+@click.option(
+    "--model",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Model directory of the learned method (default: the shipped one).",
 )
 @frames_option
 @lod_option
@@ -60,7 +67,8 @@ def dress(
     input_path: Path,
     output: Path,
     garment: str,
-    method: str,
+    method: str | None,
+    model: Path | None,
     frames: str | None,
     lod: str,
     body_model: Path | None,
@@ -71,12 +79,18 @@ def dress(
 ) -> None:
     """Dress the animated SMPL body of INPUT; write the garment layer to OUTPUT."""
     frame_range, beta_values = parse_frames(frames), parse_betas(betas)
+    if method is None:
+        method = LearnedMethod.name if model is not None else default_method(garment)
+        if method != LearnedMethod.name:
+            click.echo(f"no trained model ships for '{garment}' yet: using {method}", err=True)
+    if model is not None and method != LearnedMethod.name:
+        raise click.BadParameter("a model directory is for --method learned", param_hint="--model")
     with FrameProgress(method) as bar, user_errors():
         result = dress_stage(
             input_path,
             output,
             garment=garment,
-            method=method,
+            method=LearnedMethod(model) if method == LearnedMethod.name else method,
             frames=frame_range,
             lod=lod,
             body_model=body_model,

@@ -17,6 +17,7 @@ from usd_garment.cli.garment import garment
 from usd_garment.cli.motion import motion
 from usd_garment.cli.project import project
 from usd_garment.cli.simulate import simulate
+from usd_garment.cli.train import train
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -38,3 +39,4 @@ main.add_command(dataset)
 main.add_command(motion)
 main.add_command(fields)
 main.add_command(project)
+main.add_command(train)

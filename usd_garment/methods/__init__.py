@@ -2,10 +2,12 @@
 
 from usd_garment.methods.base import GarmentMethod, available_methods, get_method, register_method
 from usd_garment.methods.lbs import LbsMethod, LbsPushOutMethod
+from usd_garment.methods.learned import LearnedMethod
 from usd_garment.methods.simulation import SimulationMethod
 
 register_method(LbsMethod.name, LbsMethod)
 register_method(LbsPushOutMethod.name, LbsPushOutMethod)
 register_method(SimulationMethod.name, SimulationMethod)
+register_method(LearnedMethod.name, LearnedMethod)
 
 __all__ = ["GarmentMethod", "available_methods", "get_method", "register_method"]

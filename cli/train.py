@@ -1,0 +1,187 @@
+"""``usd-garment train``: train the learned method's networks from a canonical training set
+(``usd-garment project``) into a model directory, with progress bars, a plain-text log and
+plots; ``train compare`` draws the paper's Fig. 4 from several runs."""
+
+from __future__ import annotations
+
+import json
+import shlex
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, TypeVar
+
+import click
+from tqdm import tqdm
+
+from usd_garment.cli.errors import user_errors
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def _train_options(command: F) -> F:
+    """Options shared by the stages."""
+    for option in reversed((
+        click.option("--data", type=click.Path(dir_okay=False, path_type=Path), required=True,
+                     help="Canonical training set (.npz, from 'usd-garment project')."),
+        click.option("--out", type=click.Path(file_okay=False, path_type=Path), required=True,
+                     help="Model directory (run folder) to train into; created."),
+        click.option("--device", default="cpu", show_default=True,
+                     help="Torch device, e.g. cpu or cuda."),
+        click.option("--resume", is_flag=True,
+                     help="Continue from the run folder's checkpoints."),
+        click.option("--config", "config_path", type=click.Path(dir_okay=False, path_type=Path),
+                     default=None, help="JSON of settings per stage (keys pose, vae, regressor, "
+                     "ablation, version); default: the run folder's config.json, else defaults."),
+        click.option("--ablation", type=click.Choice(("none", "no-collision",
+                     "no-self-supervision")), default=None,
+                     help="The paper's VAE ablations (default: none, the full model)."),
+        click.option("--epochs", "epochs", multiple=True, metavar="STAGE=N",
+                     help="Epochs of a stage, e.g. --epochs vae=200 (repeatable)."),
+    )):  # fmt: skip
+        command = option(command)
+    return command
+
+
+@click.group()
+def train() -> None:
+    """Train the learned garment method: pose codec, garment VAE, regressor."""
+
+
+def _settings(out: Path, config_path: Path | None, ablation: str | None, epochs: tuple[str, ...],
+              device: str) -> Any:  # fmt: skip
+    from usd_garment.training.pipeline import STAGES, TrainSettings
+
+    source = config_path or (out / "config.json")
+    values = json.loads(source.read_text(encoding="utf-8")) if source.is_file() else {}
+    if config_path is not None and not config_path.is_file():
+        raise FileNotFoundError(f"{config_path}: no such settings file")
+    if ablation is not None:
+        values["ablation"] = ablation
+    for text in epochs:
+        stage, _, count = text.partition("=")
+        if stage not in STAGES or not count.isdigit():
+            raise click.BadParameter(f"expected STAGE=N with STAGE in {STAGES}, got {text!r}")
+        values.setdefault(stage, {})["epochs"] = int(count)
+    settings = TrainSettings.from_dict(values)
+    settings.set_device(device)
+    return settings
+
+
+def _command_line(
+    stages: tuple[str, ...],
+    data: Path,
+    out: Path,
+    device: str,
+    config_path: Path | None,
+    ablation: str | None,
+    epochs: tuple[str, ...],
+) -> str:
+    """The ``usd-garment train`` command that trains the same model (recorded in it)."""
+    words = ["train", "all" if len(stages) > 1 else stages[0], "--data", str(data)]
+    words += ["--out", str(out), "--device", device]
+    if config_path is not None:
+        words += ["--config", str(config_path)]
+    if ablation is not None:
+        words += ["--ablation", ablation]
+    for text in epochs:
+        words += ["--epochs", text]
+    return "usd-garment " + shlex.join(words)
+
+
+def _run(
+    stages: tuple[str, ...],
+    data: Path,
+    out: Path,
+    device: str,
+    resume: bool,
+    config_path: Path | None,
+    ablation: str | None,
+    epochs: tuple[str, ...],
+) -> None:
+    with user_errors():
+        from usd_garment.body.io import load_body_model
+        from usd_garment.canonical.dataset import load_canonical_set
+        from usd_garment.fields.body_fields import load_body_fields
+        from usd_garment.training.pipeline import (
+            STAGES,
+            assemble_model,
+            load_stage,
+            train_stage,
+        )
+        from usd_garment.training.plots import plot_curves
+
+        settings = _settings(out, config_path, ablation, epochs, device)
+        canonical = load_canonical_set(data)
+        body = load_body_model(None)
+        fields = load_body_fields()
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "config.json").write_text(
+            json.dumps(settings.to_dict(), indent=1) + "\n", encoding="utf-8"
+        )
+        for stage in stages:
+            bar = tqdm(desc=stage, unit="epoch", disable=None)
+
+            def progress(name: str, epoch: int, total: int, row: dict[str, Any]) -> None:
+                bar.total = total  # noqa: B023 (one bar per stage, used within it)
+                bar.update(epoch - bar.n)  # noqa: B023
+                shown = {k: v for k, v in row.items() if k.startswith("val_")}
+                bar.set_postfix({k[4:]: f"{v:.4g}" for k, v in list(shown.items())[:3]})  # noqa: B023
+
+            try:
+                record = train_stage(
+                    stage, canonical, out, settings, fields=fields, resume=resume,
+                    progress=progress,
+                )  # fmt: skip
+            finally:
+                bar.close()
+            click.echo(f"{stage}: {len(record['history']['epochs'])} epochs in "
+                       f"{record['seconds']:.1f} s")  # fmt: skip
+        records = {}
+        for stage in STAGES:
+            try:
+                records[stage] = load_stage(out, stage)[1]
+            except FileNotFoundError:
+                continue
+        plot_curves(records, out / "curves.png")
+        click.echo(f"wrote {out / 'curves.png'}, log {out / 'train.log'}")
+        if len(records) == len(STAGES):
+            command = _command_line(stages, data, out, device, config_path, ablation, epochs)
+            assemble_model(out, canonical, body, settings, {"command": command})
+            click.echo(f"wrote the model {out}")
+
+
+def _stage_command(name: str, stages: tuple[str, ...], help_text: str) -> None:
+    @train.command(name, help=help_text)
+    @_train_options
+    def command(data: Path, out: Path, device: str, resume: bool, config_path: Path | None,
+                ablation: str | None, epochs: tuple[str, ...]) -> None:  # fmt: skip
+        _run(stages, data, out, device, resume, config_path, ablation, epochs)
+
+
+_stage_command("pose", ("pose",), "Train the 10-d pose code (an autoencoder of the pose).")
+_stage_command("vae", ("vae",), "Train the garment VAE with the collision losses.")
+_stage_command("regressor", ("regressor",), "Train the GRU regressor (needs pose and vae).")
+_stage_command("all", ("pose", "vae", "regressor"), "Train every stage, then write the model.")
+
+
+@train.command("compare", short_help="Collisions per epoch of several VAE runs (Fig. 4).")
+@click.argument("runs", nargs=-1, required=True, type=click.Path(file_okay=False, path_type=Path))
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="PNG to write.")  # fmt: skip
+def compare(runs: tuple[Path, ...], output: Path) -> None:
+    """The paper's Fig. 4 from the VAE histories of RUNS (e.g. with and without the
+    self-supervised term): collisions on held-out data per epoch."""
+    with user_errors():
+        from usd_garment.training.pipeline import load_stage
+        from usd_garment.training.plots import plot_collisions
+
+        histories = {}
+        for run in runs:
+            record = load_stage(run, "vae")[1]
+            config = record["config"]
+            label = ("full model" if config.get("collision") and config.get("self_supervised")
+                     else "w/o self-supervised term" if config.get("collision")
+                     else "w/o collision loss")  # fmt: skip
+            histories[f"{label} ({run.name})"] = record["history"]["epochs"]
+        plot_collisions(histories, output)
+    click.echo(f"wrote {output}")

@@ -1,0 +1,116 @@
+"""The learned method end to end on a tiny run: ``train all`` on a small canonical set writes a
+model directory (weights, config, log, curves), ``dress --method learned --model`` reads it and
+writes the input's time codes, and a model is refused on another body or another template."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from usd_garment.body.model import BodyModel
+from usd_garment.canonical.dataset import CanonicalSet, save_canonical_set
+from usd_garment.cli.main import main
+from usd_garment.garment.library import load_template
+from usd_garment.methods.learned import to_frames
+from usd_garment.methods.learned_model import ModelError, body_fingerprint, load_learned_model
+from usd_garment.motion.procedural import make_motion
+from usd_garment.usd.body_layer import write_body_layer
+from usd_garment.usd.garment_read import read_garment_layer
+
+pytest.importorskip("matplotlib")
+
+#: Small networks so that training takes seconds.
+TINY = {
+    "pose": {"hidden": 32, "epochs": 2, "batch_size": 64},
+    "vae": {"epochs": 2, "batch_size": 16, "encoder_hidden": [32], "self_supervised_batch": 8,
+            "eval_random": 16, "decoder": {"kind": "basis", "hidden": [32], "basis_size": 8}},
+    "regressor": {"hidden": [16], "epochs": 2, "crop_length": 12, "batch_size": 4},
+}  # fmt: skip
+
+
+def tiny_canonical_set(body: BodyModel, path: Path) -> None:
+    """Three short sequences (train, validation, test) of the low T-shirt, breathing in and out
+    with the motion: enough for the pipeline, not a garment model."""
+    template = load_template("tshirt", "low")
+    v = template.vertices.astype(np.float32)
+    canonical, pose, trans, offsets = [], [], [], [0]
+    for seed in range(3):
+        motion = make_motion("walk", 20, 30.0, seed=seed, body=body)
+        swell = 0.003 * np.sin(np.linspace(0, 3, 20, dtype=np.float32))[:, None, None]
+        canonical.append(v[None] * (1.0 + swell))
+        pose.append(motion.pose)
+        trans.append(motion.trans)
+        offsets.append(offsets[-1] + 20)
+    frames = sum(len(c) for c in canonical)
+    save_canonical_set(
+        path,
+        CanonicalSet(
+            canonical=np.concatenate(canonical), frame_offsets=np.array(offsets),
+            betas=np.zeros((3, 10)), pose=np.concatenate(pose), trans=np.concatenate(trans),
+            fps=np.full(3, 30.0), error=np.zeros(frames), max_error=np.zeros(frames),
+            template=v, faces=template.faces, sources=["a", "b", "c"],
+            splits=["train", "validation", "test"], metadata={"garment": "tshirt", "lod": "low"},
+        ),
+    )  # fmt: skip
+
+
+def _run(args: list[object]) -> tuple[int, str]:
+    result = CliRunner().invoke(main, [str(a) for a in args])
+    assert not isinstance(result.exception, AssertionError)
+    return result.exit_code, result.output
+
+
+def test_train_then_dress(body_model: BodyModel, synthetic_body: BodyModel, tmp_path: Path) -> None:
+    if body_model is synthetic_body:
+        pytest.skip("needs the embedded default body and its fields")
+    data, model = tmp_path / "set.npz", tmp_path / "model"
+    tiny_canonical_set(body_model, data)
+    config = tmp_path / "tiny.json"
+    config.write_text(json.dumps(TINY))
+    code, output = _run(["train", "all", "--data", data, "--out", model, "--config", config])
+    assert code == 0, output
+    for name in ("model.json", "weights.safetensors", "curves.png", "train.log", "config.json"):
+        assert (model / name).is_file(), name
+    log = (model / "train.log").read_text().splitlines()
+    assert [line.split()[2] for line in log] == ["pose"] * 2 + ["vae"] * 2 + ["regressor"] * 2
+    info = json.loads((model / "model.json").read_text())
+    assert info["garment"] == "tshirt" and info["vertices"] == 1015 and info["lod"] == "low"
+    assert info["body"]["fingerprint"] == body_fingerprint(body_model)
+    assert info["command"].startswith("usd-garment train all")
+    assert load_learned_model(model, body_model).vae.num_vertices == 1015
+
+    body = tmp_path / "walk.usda"  # 60 fps, so the networks' 30 fps is resampled both ways
+    write_body_layer(body, make_motion("walk", 9, 60.0, seed=5, body=body_model), body_model)
+    out = tmp_path / "walk_tshirt.usdc"
+    code, output = _run(["dress", body, "-o", out, "--model", model, "--lod", "low"])
+    assert code == 0, output
+    points, _, layer = read_garment_layer(out)
+    assert points.shape == (9, 1015, 3) and np.isfinite(points).all()
+    assert layer.method == "learned"
+    np.testing.assert_array_equal(layer.time_codes, np.arange(9))
+
+    code, output = _run(["dress", body, "-o", tmp_path / "x.usdc", "--model", model])
+    assert code == 1 and "1015 vertices" in output  # trained on the low T-shirt, not the high
+    with pytest.raises(ModelError, match="trained for the body"):
+        load_learned_model(model, synthetic_body)
+    code, output = _run(["dress", body, "-o", tmp_path / "y.usdc", "--model", tmp_path])
+    assert code == 1 and "not a model directory" in output
+    assert not (tmp_path / "x.usdc").exists() and not (tmp_path / "y.usdc").exists()
+
+    code, output = _run(["train", "compare", model, "-o", tmp_path / "fig4.png"])
+    assert code == 0 and (tmp_path / "fig4.png").is_file()
+
+
+def test_latents_return_to_the_input_frames() -> None:
+    import torch
+
+    values = torch.arange(4, dtype=torch.float32)[:, None]  # at 30 fps: t = 0, 1/30, 2/30, 3/30
+    at_60 = to_frames(values, 60.0, 7)
+    np.testing.assert_allclose(at_60[:, 0].numpy(), [0, 0.5, 1, 1.5, 2, 2.5, 3])
+    at_15 = to_frames(values, 15.0, 2)
+    np.testing.assert_allclose(at_15[:, 0].numpy(), [0, 2])
+    np.testing.assert_allclose(to_frames(values[:1], 24.0, 3)[:, 0].numpy(), [0, 0, 0])

@@ -1,0 +1,149 @@
+"""The learned garment method of the paper: motion descriptor γ → GRU regressor → latent codes z →
+VAE decoder → canonical garment X → garment model M_G(X, β, θ) → posed garment.
+
+The networks run at the model's 30 fps: the input motion is resampled to it, and the latent codes
+are interpolated back to the input's frames before decoding and posing with the input's own
+poses, so the output has the input's time codes. Everything is batched over frames except the
+GRU's recurrence.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from usd_garment.body.model import BodyModel
+from usd_garment.fields.body_fields import BodyFields, load_body_fields
+from usd_garment.garment.model import GarmentModel
+from usd_garment.garment.template import GarmentTemplate
+from usd_garment.methods.base import Progress
+from usd_garment.methods.learned_model import LearnedModel, ModelError, load_learned_model
+from usd_garment.motion.sequence import SmplMotion
+from usd_garment.regressor.descriptor import MODEL_FPS, describe_motion
+
+#: Where the shipped default model of each garment lives.
+SHIPPED_MODELS = Path(__file__).resolve().parent.parent / "data" / "models"
+#: Frames decoded and posed at once (bounds memory: ~N·(3 + 24 + 30) floats per frame).
+FRAMES_PER_CHUNK = 256
+
+
+def shipped_model(garment: str) -> Path | None:
+    """The shipped default model directory of ``garment``, or None when there is none."""
+    path = SHIPPED_MODELS / garment
+    return path if (path / "model.json").is_file() else None
+
+
+def default_method(garment: str) -> str:
+    """The method ``dress`` uses when none is asked for: "learned" where a trained model ships
+    for ``garment``, else the "lbs+postprocess" baseline."""
+    return LearnedMethod.name if shipped_model(garment) is not None else "lbs+postprocess"
+
+
+def to_frames(values: torch.Tensor, fps: float, count: int) -> torch.Tensor:
+    """``values`` ``(T', ...)`` sampled at :data:`MODEL_FPS` from time 0, linearly interpolated
+    at ``count`` frames sampled at ``fps`` from time 0 (clamped at the last sample)."""
+    if values.shape[0] == 1:
+        return values.expand(count, *values.shape[1:])
+    u = torch.arange(count, dtype=torch.float64) * (MODEL_FPS / fps)
+    u = u.clamp(max=values.shape[0] - 1)
+    i0 = u.floor().long().clamp(max=values.shape[0] - 2)
+    alpha = (u - i0).to(values.dtype).reshape(-1, *([1] * (values.dim() - 1)))
+    return (1.0 - alpha) * values[i0] + alpha * values[i0 + 1]
+
+
+class LearnedMethod:
+    """The trained networks of a model directory (default: the shipped model of the garment).
+
+    Args:
+        model: a model directory (see :mod:`learned_model`), or None for the shipped default
+            of the template's garment.
+        fields: the body's diffused fields for M_G; the default body's by default.
+    """
+
+    name = "learned"
+
+    def __init__(self, model: str | Path | None = None, fields: BodyFields | None = None) -> None:
+        self.model_path = Path(model) if model is not None else None
+        self._model: LearnedModel | None = None
+        self._fields = fields
+
+    @property
+    def version(self) -> str:
+        return self._model.version if self._model is not None else "unloaded"
+
+    @property
+    def settings(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"model": str(self.model_path) if self.model_path else "shipped"}
+        if self._model is not None:
+            out.update(
+                garment=self._model.garment,
+                lod=self._model.lod,
+                version=self._model.version,
+                body_fingerprint=self._model.body_fingerprint,
+            )
+        return out
+
+    def load(self, garment: str, body: BodyModel) -> LearnedModel:
+        """The model for ``garment`` on ``body`` (loaded once).
+
+        Raises:
+            ModelError: no model for that garment, an unreadable one, or one for another body.
+        """
+        if self._model is None:
+            path = self.model_path or shipped_model(garment)
+            if path is None:
+                raise ModelError(
+                    f"no trained model ships for the garment '{garment}' yet: pass --model DIR "
+                    "or another --method"
+                )
+            self.model_path = path
+            self._model = load_learned_model(path, body)
+        else:
+            self._model.check_body(body)
+        if self._model.garment != garment:
+            raise ModelError(
+                f"{self.model_path}: a model of the garment '{self._model.garment}', "
+                f"not '{garment}'"
+            )
+        return self._model
+
+    def predict(
+        self,
+        motion: SmplMotion,
+        body: BodyModel,
+        template: GarmentTemplate,
+        progress: Progress | None = None,
+    ) -> np.ndarray:
+        """Posed garment points ``(T, N, 3)`` float32, canonical frame (m).
+
+        Raises:
+            ModelError: no usable model, or one trained on another template.
+        """
+        model = self.load(template.name, body)
+        if len(template.vertices) != model.vertices:
+            raise ModelError(
+                f"{self.model_path}: trained on the {model.lod} {model.garment} "
+                f"({model.vertices} vertices), not the {template.lod} one "
+                f"({len(template.vertices)} vertices)"
+            )
+        fields = self._fields if self._fields is not None else load_body_fields()
+        self._fields = fields
+        garment_model = GarmentModel(body, fields)
+        betas = torch.as_tensor(motion.betas, dtype=torch.float32)
+        pose = torch.as_tensor(motion.pose, dtype=torch.float32)
+        trans = torch.as_tensor(motion.trans, dtype=torch.float32)
+        t_frames = motion.num_frames
+        out = np.empty((t_frames, model.vertices, 3), dtype=np.float32)
+        with torch.no_grad():
+            gamma, _ = describe_motion(motion, model.pose_codec)
+            z = to_frames(model.regressor.predict(gamma, betas), motion.fps, t_frames)
+            for s in range(0, t_frames, FRAMES_PER_CHUNK):
+                e = min(s + FRAMES_PER_CHUNK, t_frames)
+                x = model.vae.decode(z[s:e])
+                out[s:e] = garment_model(x, betas, pose[s:e], trans[s:e]).vertices.numpy()
+                if progress is not None:
+                    progress(e)
+        return out
