@@ -262,3 +262,21 @@ def test_lead_in_matches_the_graded_rest_shape(betas: list[float]) -> None:
     first = method.result.lead_in_checks[0]
     assert first.stretch_p99 < 1.06 and first.inside_elsewhere_share < 0.002
     assert method.settings["lead_in_stretch_p99_first"] == pytest.approx(first.stretch_p99)
+
+
+def test_body_parts_are_closed_colliders() -> None:
+    """Each body part's collider is closed over its holes; the parts fill the body."""
+    from usd_garment.sim.cloth import _closed_part
+
+    body = capsule()
+    labels = (body.vertices[body.faces].mean(axis=1)[:, 0] > 0).astype(np.int64)
+    volume = 0.0
+    for label in (0, 1):
+        part, faces = _closed_part(np.asarray(body.faces)[labels == label])
+        mesh = trimesh.Trimesh(part.of(np.asarray(body.vertices)), faces, process=False)
+        assert mesh.is_watertight and mesh.is_winding_consistent and len(part.rims) == 1
+        volume += mesh.volume
+    assert volume == pytest.approx(body.volume, rel=1e-3)
+    result = run_tube(frames=3, speed=1.0, around=12, along=7, lead_in=1, settle_frames=1,
+                      body_parts=labels)  # fmt: skip
+    assert_good(result, 3)

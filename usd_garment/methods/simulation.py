@@ -43,6 +43,16 @@ FRAMES_PER_CHUNK = 64
 GRADING_NEIGHBOURS = 8
 
 
+#: Joints (SMPL order) whose skin becomes a collider of its own (see ``collider_parts``): each
+#: arm from the shoulder down and each leg from the hip down; the rest is the trunk.
+COLLIDER_PARTS: dict[str, tuple[int, ...]] = {
+    "left arm": (16, 18, 20, 22),
+    "right arm": (17, 19, 21, 23),
+    "left leg": (1, 4, 7, 10),
+    "right leg": (2, 5, 8, 11),
+}
+
+
 class SimulationError(ValueError):
     """A sequence failed (NaN, a garment that fell off, a long run of bad frames, or with
     ``strict`` any frame failing its checks with the most substeps): nothing to write."""
@@ -86,6 +96,25 @@ def shape_offsets(body: BodyModel, vertices: np.ndarray, betas: np.ndarray) -> n
     betas_t = torch.as_tensor(np.asarray(betas), dtype=torch.float32)[None]
     offsets = blend_shapes(betas_t, body.shapedirs[torch.from_numpy(index.reshape(-1))])
     return np.einsum("nk,nkc->nc", weights, offsets[0].double().numpy().reshape(*index.shape, 3))
+
+
+def collider_parts(body: BodyModel) -> np.ndarray:
+    """``(F,)`` int64 collider label of each body triangle: 0 for the trunk (and head), ``k``
+    for the ``k``-th part of ``COLLIDER_PARTS``, by the joint with the largest skinning weight,
+    taken by majority over the triangle's corners (the trunk on a three-way tie).
+
+    Separate colliders let cloth pinched between an arm and the trunk (a gap narrower than two
+    contact radii) feel both surfaces; one collider only pushes a vertex away from its closest
+    surface, into the other.
+    """
+    joint = body.weights.numpy().argmax(axis=1)
+    vertex_part = np.zeros(body.num_vertices, dtype=np.int64)
+    for k, joints in enumerate(COLLIDER_PARTS.values(), start=1):
+        vertex_part[np.isin(joint, joints)] = k
+    corners = vertex_part[body.faces.numpy()]  # (F, 3)
+    majority = np.where(corners[:, 1] == corners[:, 2], corners[:, 1], corners[:, 0])
+    return np.where((corners[:, 0] == corners[:, 1]) | (corners[:, 0] == corners[:, 2]) |
+                    (corners[:, 1] == corners[:, 2]), majority, 0)  # fmt: skip
 
 
 def lead_in_bodies(
@@ -138,12 +167,15 @@ class SimulationMethod:
         strict: bool = False,
         limits: CheckLimits | None = None,
         max_bad_run: int = MAX_BAD_RUN,
+        contact: ContactSettings | None = None,
+        split_colliders: bool = False,
     ) -> None:
         """Args: solver steps and iterations per frame, the fabric (cotton by default), lead-in
         and settle frames, the most substeps a retried frame may use, the start shape (default:
         the draped template), whether the first bad frame fails the sequence (``strict``), the
-        frame checks' limits (``CheckLimits()`` by default) and the most consecutive bad frames
-        kept when not strict."""
+        frame checks' limits (``CheckLimits()`` by default), the most consecutive bad frames
+        kept when not strict, the contact settings (``ContactSettings()`` by default) and
+        whether the body is one collider per part (``collider_parts``) or a single one."""
         if substeps < 1 or iterations < 1 or lead_in < 0 or settle < 0 or max_bad_run < 0:
             raise ValueError(
                 "substeps and iterations must be >= 1, lead-in, settle and max_bad_run >= 0"
@@ -160,6 +192,8 @@ class SimulationMethod:
         self.strict = strict
         self.limits = limits or CheckLimits()
         self.max_bad_run = max_bad_run
+        self.contact = contact or ContactSettings()
+        self.split_colliders = split_colliders
         self.start_source = ""
         self.result: SimResult | None = None
 
@@ -180,7 +214,10 @@ class SimulationMethod:
             "rest-body vertices' shape blendshapes)",
             "start_shape": "draped template graded like the rest shape, on the shaped T-pose "
             "body; the lead-in eases the pose only",
-            "contact": asdict(ContactSettings()),
+            "contact": asdict(self.contact),
+            "colliders": "trunk, " + ", ".join(COLLIDER_PARTS)
+            if self.split_colliders
+            else "whole body",
             "limits": asdict(self.limits),
             "strict": self.strict,
             "max_bad_run": self.max_bad_run,
@@ -241,11 +278,13 @@ class SimulationMethod:
             iterations=self.iterations,
             fps=motion.fps,
             max_substeps=self.max_substeps,
+            contact=self.contact,
             limits=self.limits,
             strict=self.strict,
             max_bad_run=self.max_bad_run,
             progress=report,
             initial_vertices=initial,
+            body_parts=collider_parts(body) if self.split_colliders else None,
         )
         if not self.result.ok:
             raise SimulationError(f"simulation failed at {self.result.message}")

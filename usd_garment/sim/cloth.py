@@ -129,6 +129,7 @@ class GarmentSimulator:
         fps: float = 30.0,
         contact: ContactSettings | None = None,
         initial_vertices: np.ndarray | None = None,
+        body_parts: np.ndarray | None = None,
         device: str = "cpu",
     ) -> None:
         """Build the Newton model.
@@ -144,6 +145,9 @@ class GarmentSimulator:
             fps: frames per second of the body motion.
             contact: contact parameters; ``ContactSettings()`` by default.
             initial_vertices: ``(N, 3)`` garment start positions; ``rest_vertices`` by default.
+            body_parts: ``(Fb,)`` integer part label of each body triangle: each part becomes
+                its own collider, so a vertex between two parts (cloth pinched between an arm
+                and the trunk) feels both; one collider for the whole body by default.
             device: Warp device, ``"cpu"`` or e.g. ``"cuda:0"``.
 
         Raises:
@@ -158,6 +162,10 @@ class GarmentSimulator:
             raise ValueError(f"initial_vertices must be {rest.shape}, got {start.shape}")
         if substeps < 1 or iterations < 1 or not fps > 0:
             raise ValueError("substeps and iterations must be >= 1 and fps > 0")
+        labels = np.zeros(len(body_faces), np.int64) if body_parts is None else body_parts
+        labels = np.asarray(labels)
+        if labels.shape != (len(body_faces),) or not np.issubdtype(labels.dtype, np.integer):
+            raise ValueError(f"body_parts must be ({len(body_faces)},) integers")
 
         wp, newton = _import_newton()
         from newton.solvers import SolverStyle3D, style3d
@@ -189,8 +197,13 @@ class GarmentSimulator:
         )
         # The solver mixes the cloth's and the shape's friction as sqrt(mu_cloth * mu_shape).
         shape_cfg = newton.ModelBuilder.ShapeConfig(mu=self.material.friction)
-        self._body_mesh = newton.Mesh(body0, body_faces.ravel(), compute_inertia=False)
-        self._body_shape = builder.add_shape_mesh(body=-1, mesh=self._body_mesh, cfg=shape_cfg)
+        # One closed collider per body part: (shape index, its vertices, its Newton mesh).
+        self._parts: list[tuple[int, _PartVertices, Any]] = []
+        for label in np.unique(labels):
+            part, part_faces = _closed_part(body_faces[labels == label])
+            mesh = newton.Mesh(part.of(body0), part_faces.ravel(), compute_inertia=False)
+            shape = builder.add_shape_mesh(body=-1, mesh=mesh, cfg=shape_cfg)
+            self._parts.append((shape, part, mesh))
         self.model = builder.finalize(device=device)
         self.model.set_gravity((0.0, -GRAVITY, 0.0))
         self.model.soft_contact_ke = self.contact.stiffness
@@ -207,7 +220,8 @@ class GarmentSimulator:
         self.state_0 = self.model.state()
         self.state_1 = self.model.state()
         self.control = self.model.control()
-        self._body_wp = self._body_mesh.mesh  # the wp.Mesh the collision pipeline queries
+        # The wp.Mesh of each part, which the collision pipeline queries.
+        self._part_meshes = [(used, mesh.mesh) for _, used, mesh in self._parts]
         self.body_vertices = body0.copy()
 
     @property
@@ -239,18 +253,20 @@ class GarmentSimulator:
         self._cover_body(body)
 
     def _set_body(self, vertices: np.ndarray, velocities: np.ndarray) -> None:
-        """Move the body collider: overwrite its Warp mesh and refit the mesh's BVH."""
-        self._body_wp.points.assign(vertices.astype(np.float32))
-        self._body_wp.velocities.assign(velocities.astype(np.float32))
-        self._body_wp.refit()
+        """Move the body colliders: overwrite their Warp meshes and refit the meshes' BVHs."""
+        for part, mesh in self._part_meshes:
+            mesh.points.assign(part.of(vertices).astype(np.float32))
+            mesh.velocities.assign(part.of(velocities).astype(np.float32))
+            mesh.refit()
 
     def _cover_body(self, *frames: np.ndarray) -> None:
-        """Set the body shape's broad-phase box (computed by Newton from the first vertices
+        """Set the body shapes' broad-phase boxes (computed by Newton from the first vertices
         only) to cover the given body frames, so the broad phase never culls the moving body."""
         lower = self.model.shape_collision_aabb_lower.numpy()
         upper = self.model.shape_collision_aabb_upper.numpy()
-        lower[self._body_shape] = np.min([f.min(axis=0) for f in frames], axis=0) - AABB_PAD
-        upper[self._body_shape] = np.max([f.max(axis=0) for f in frames], axis=0) + AABB_PAD
+        for shape, part, _ in self._parts:
+            lower[shape] = np.min([f[part.used].min(axis=0) for f in frames], axis=0) - AABB_PAD
+            upper[shape] = np.max([f[part.used].max(axis=0) for f in frames], axis=0) + AABB_PAD
         self.model.shape_collision_aabb_lower.assign(lower)
         self.model.shape_collision_aabb_upper.assign(upper)
 
@@ -281,6 +297,55 @@ class GarmentSimulator:
             self.state_0, self.state_1 = self.state_1, self.state_0
         self.body_vertices = target
         return self.points
+
+
+@dataclass(frozen=True)
+class _PartVertices:
+    """The vertices of one body part's collider: body vertices ``used`` ``(U,)``, then one
+    vertex per hole of the part's surface at the centroid of the hole's rim (``rims``)."""
+
+    used: np.ndarray
+    rims: tuple[np.ndarray, ...]
+
+    def of(self, body: np.ndarray) -> np.ndarray:
+        """``(U + len(rims), 3)`` collider vertices of body vertices (or velocities)
+        ``(Vb, 3)``."""
+        caps = [body[rim].mean(axis=0) for rim in self.rims]
+        return np.concatenate([body[self.used], np.reshape(caps, (-1, 3))])
+
+
+def _closed_part(faces: np.ndarray) -> tuple[_PartVertices, np.ndarray]:
+    """A body part's triangles ``(Fp, 3)`` (body vertex indices) closed by a fan over each
+    hole of its surface, so its inside is well defined (the caps lie inside the body).
+
+    Returns:
+        The part's vertices and its ``(Fp + caps, 3)`` triangles in their indices, wound like
+        ``faces``.
+    """
+    directed = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    key = np.sort(directed, axis=1)
+    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    rim_edges = directed[counts[inverse.ravel()] == 1]  # (B, 2), as wound in their face
+    used = np.unique(faces)
+    index = np.full(int(faces.max()) + 1, -1, dtype=np.int64)
+    index[used] = np.arange(len(used))
+    # Holes: connected components of the rim edges (union-find on body vertex indices).
+    parent = {int(v): int(v) for v in rim_edges.ravel()}
+
+    def root(v: int) -> int:
+        while parent[v] != v:
+            parent[v] = parent[parent[v]]
+            v = parent[v]
+        return v
+
+    for a, b in rim_edges:
+        parent[root(int(a))] = root(int(b))
+    hole_of_edge = np.array([root(int(a)) for a, _ in rim_edges], dtype=np.int64)
+    holes = np.unique(hole_of_edge)
+    rims = tuple(np.unique(rim_edges[hole_of_edge == h]) for h in holes)
+    centre = len(used) + np.searchsorted(holes, hole_of_edge)
+    caps = np.stack([index[rim_edges[:, 1]], index[rim_edges[:, 0]], centre], axis=1)
+    return _PartVertices(used, rims), np.concatenate([index[faces], caps]).astype(np.int64)
 
 
 def _points(values: np.ndarray, name: str) -> np.ndarray:
@@ -381,6 +446,7 @@ def simulate_sequence(
     max_bad_run: int = MAX_BAD_RUN,
     progress: Callable[[int, int], None] | None = None,
     initial_vertices: np.ndarray | None = None,
+    body_parts: np.ndarray | None = None,
 ) -> SimResult:
     """Simulate a garment through a body motion, checking every frame.
 
@@ -417,6 +483,8 @@ def simulate_sequence(
         progress: called as ``progress(done, total)`` after each simulated frame.
         initial_vertices: ``(N, 3)`` garment start positions on ``body_rest`` (e.g. the draped
             template); ``rest_vertices`` by default.
+        body_parts: ``(Fb,)`` part label per body triangle, one collider each (see
+            ``GarmentSimulator``); the frame checks always use the whole body.
 
     Returns:
         The ``SimResult``; check ``ok`` before using ``points``, and ``bad`` for the frames
@@ -441,7 +509,7 @@ def simulate_sequence(
     sim = GarmentSimulator(
         rest_vertices, faces, body_faces, start_body, material,
         substeps=substeps, iterations=iterations, fps=fps, contact=contact,
-        initial_vertices=initial_vertices,
+        initial_vertices=initial_vertices, body_parts=body_parts,
     )  # fmt: skip
     edges = unique_edges(np.asarray(faces))
     rest = np.asarray(rest_vertices, dtype=np.float64)
