@@ -80,9 +80,7 @@ def dress(
     """Dress the animated SMPL body of INPUT; write the garment layer to OUTPUT."""
     frame_range, beta_values = parse_frames(frames), parse_betas(betas)
     if method is None:
-        method = LearnedMethod.name if model is not None else default_method(garment)
-        if method != LearnedMethod.name:
-            click.echo(f"no trained model ships for '{garment}' yet: using {method}", err=True)
+        method = LearnedMethod.name if model is not None else default_method(garment, lod)
     if model is not None and method != LearnedMethod.name:
         raise click.BadParameter("a model directory is for --method learned", param_hint="--model")
     with FrameProgress(method) as bar, user_errors():

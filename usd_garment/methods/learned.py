@@ -9,6 +9,7 @@ GRU's recurrence.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Any
 
@@ -30,16 +31,21 @@ SHIPPED_MODELS = Path(__file__).resolve().parent.parent / "data" / "models"
 FRAMES_PER_CHUNK = 256
 
 
-def shipped_model(garment: str) -> Path | None:
-    """The shipped default model directory of ``garment``, or None when there is none."""
+def shipped_model(garment: str, lod: str | None = None) -> Path | None:
+    """The shipped default model directory of ``garment`` (trained on ``lod``, when given), or
+    None when there is none."""
     path = SHIPPED_MODELS / garment
-    return path if (path / "model.json").is_file() else None
+    if not (path / "model.json").is_file():
+        return None
+    if lod is not None and json.loads((path / "model.json").read_text()).get("lod") != lod:
+        return None
+    return path
 
 
-def default_method(garment: str) -> str:
-    """The method ``dress`` uses when none is asked for: "learned" where a trained model ships
-    for ``garment``, else the "lbs+postprocess" baseline."""
-    return LearnedMethod.name if shipped_model(garment) is not None else "lbs+postprocess"
+def default_method(garment: str, lod: str) -> str:
+    """The method ``dress`` uses when none is asked for: "learned" where a trained model of
+    ``garment`` at ``lod`` ships, else the "lbs+postprocess" baseline."""
+    return LearnedMethod.name if shipped_model(garment, lod) is not None else "lbs+postprocess"
 
 
 def to_frames(values: torch.Tensor, fps: float, count: int) -> torch.Tensor:
