@@ -90,16 +90,25 @@ class LearnedModel:
             )
 
 
-def save_learned_model(path: str | Path, model: LearnedModel) -> None:
+def save_learned_model(
+    path: str | Path, model: LearnedModel, weights_dtype: torch.dtype = torch.float16
+) -> None:
     """Write ``model`` into the directory ``path`` (created; other files there are kept): the
-    weights, then ``model.json``, each written to a temporary file and renamed."""
+    weights, then ``model.json``, each written to a temporary file and renamed.
+
+    Learned parameters are stored as ``weights_dtype`` (half the size in float16); buffers (the
+    normalisation statistics, in metres) stay float32. Loading casts everything to float32.
+    """
     path = Path(path)
     path.mkdir(parents=True, exist_ok=True)
-    tensors = {
-        f"{name}.{key}": value.detach().cpu().contiguous()
-        for name, part in model.parts().items()
-        for key, value in part.state_dict().items()
-    }
+    tensors = {}
+    for name, part in model.parts().items():
+        parameters = {key for key, _ in part.named_parameters()}
+        for key, value in part.state_dict().items():
+            value = value.detach().cpu()
+            if key in parameters and value.is_floating_point():
+                value = value.to(weights_dtype)
+            tensors[f"{name}.{key}"] = value.contiguous()
     with atomic_output(path / WEIGHTS_NAME) as tmp:
         save_file(tensors, str(tmp))
     config = {
@@ -137,7 +146,11 @@ def load_learned_model(path: str | Path, body: BodyModel | None = None) -> Learn
         for name, cls in PARTS.items():
             part = cls.from_config(config["architecture"][name])
             prefix = f"{name}."
-            state = {k[len(prefix) :]: v for k, v in tensors.items() if k.startswith(prefix)}
+            state = {
+                k[len(prefix) :]: v.float() if v.is_floating_point() else v
+                for k, v in tensors.items()
+                if k.startswith(prefix)
+            }
             part.load_state_dict(state)
             parts[name] = part.eval()
         meta = {k: config[k] for k in ("garment", "lod", "vertices", "version")}

@@ -244,7 +244,7 @@ def assemble_model(
     assert isinstance(regressor, GarmentRegressor)
     meta = data.metadata
     model = LearnedModel(
-        vae=vae,
+        vae=vae.decoder_only(),  # the encoder is for training: its weights stay in checkpoints/
         pose_codec=codec,
         regressor=regressor,
         garment=str(meta.get("garment", "tshirt")),
