@@ -25,7 +25,10 @@ class CheckLimits:
         inside_depth: an inside-elsewhere vertex counts as penetrating when its signed distance
             is below ``-inside_depth`` (m); the contact radius of the solver lets cloth graze
             the skin.
-        max_inside_share: largest tolerated share of penetrating vertices (0..1).
+        max_inside_share: largest tolerated share of penetrating vertices (0..1): the per-frame
+            acceptance target for inside-elsewhere (0.5 %), so that a frame meeting the target
+            is never retried or flagged (cloth pinched where an arm lies against the trunk,
+            closer than two contact radii but not intersecting it, reads 0.1-0.4 % here).
         max_distance: largest tolerated distance of any vertex from the body surface (m): a
             vertex farther than this means the garment fell off (fatal even when bad frames
             are kept).
@@ -33,7 +36,7 @@ class CheckLimits:
     """
 
     inside_depth: float = 2e-3
-    max_inside_share: float = 0.002
+    max_inside_share: float = 0.005
     max_distance: float = 0.15
     max_stretch: float = 1.3
 
