@@ -40,7 +40,6 @@ from usd_garment.canonical.unpose import (
     unpose_constant_weights,
     unpose_nearest_vertex,
 )
-from usd_garment.dataset import SPLITS, dataset_layers
 from usd_garment.eval.body_distance import BodySurface, signed_distance
 from usd_garment.fields.body_fields import load_body_fields
 from usd_garment.garment.library import load_template
@@ -48,6 +47,7 @@ from usd_garment.garment.model import GarmentModel
 from usd_garment.motion.procedural import make_motion, random_betas
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.sim.cloth import simulate_sequence
+from usd_garment.training.dataset import SPLITS, dataset_layers
 from usd_garment.usd.garment_read import read_garment_layer
 from usd_garment.usd.read import read_smpl_motion
 

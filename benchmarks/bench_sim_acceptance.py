@@ -33,12 +33,12 @@ import numpy as np
 import torch
 
 from usd_garment.body.io import load_body_model
-from usd_garment.dataset import DatasetConfig, make_dataset, read_manifest
 from usd_garment.eval.body_distance import BodySurface, signed_distance
 from usd_garment.eval.evaluate import posed_body_vertices
 from usd_garment.garment.library import load_template
 from usd_garment.methods.simulation import shape_offsets
 from usd_garment.sim.checks import edge_lengths, unique_edges
+from usd_garment.training.dataset import DatasetConfig, make_dataset, read_manifest
 from usd_garment.usd.garment_read import read_garment_layer
 from usd_garment.usd.read import read_smpl_motion
 

@@ -12,9 +12,9 @@ from tqdm import tqdm
 
 from usd_garment.cli.errors import user_errors
 from usd_garment.cli.options import json_option, lod_option, solver_options, workers_option
-from usd_garment.dataset import MANIFEST_NAME, DatasetConfig, make_dataset
 from usd_garment.garment.template import GARMENT_NAMES
 from usd_garment.sim.material import ClothMaterial
+from usd_garment.training.dataset import MANIFEST_NAME, DatasetConfig, make_dataset
 
 
 def _capture(text: str) -> tuple[str, str]:

@@ -12,8 +12,8 @@ from usd_garment.canonical.project_layers import project_layers
 from usd_garment.canonical.projection import ProjectionSettings
 from usd_garment.cli.errors import user_errors
 from usd_garment.cli.options import FrameProgress, body_model_option, lod_option, workers_option
-from usd_garment.dataset import SPLITS, dataset_layers
 from usd_garment.garment.template import GARMENT_NAMES
+from usd_garment.training.dataset import SPLITS, dataset_layers
 
 
 @click.command("project")

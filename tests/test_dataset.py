@@ -10,10 +10,12 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from usd_garment import dataset as dataset_module
 from usd_garment.body.model import BodyModel
 from usd_garment.cli.main import main
-from usd_garment.dataset import (
+from usd_garment.methods.simulation import SimulationError
+from usd_garment.motion.procedural import make_motion
+from usd_garment.training import dataset as dataset_module
+from usd_garment.training.dataset import (
     MANIFEST_NAME,
     DatasetConfig,
     make_dataset,
@@ -21,8 +23,6 @@ from usd_garment.dataset import (
     read_manifest,
     sequence_motion,
 )
-from usd_garment.methods.simulation import SimulationError
-from usd_garment.motion.procedural import make_motion
 from usd_garment.usd.body_layer import write_body_layer
 from usd_garment.usd.garment_read import read_garment_layer
 
