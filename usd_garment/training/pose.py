@@ -14,8 +14,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from usd_garment.atomic import atomic_output
 from usd_garment.regressor.pose_code import PoseCodec, features_to_rotations, pose_to_features
+from usd_garment.training.checkpoint import resume_checkpoint, save_checkpoint
 
 #: ``progress(epoch, total, row)``: called after each epoch (1-based) with its history row.
 EpochProgress = Callable[[int, int, dict[str, Any]], None]
@@ -83,11 +83,6 @@ def evaluate_pose_codec(codec: PoseCodec, poses: torch.Tensor | np.ndarray) -> d
     return {"feature_mse": sq / count, "angle_deg": angle / count}
 
 
-def _save(path: Path, payload: dict[str, Any]) -> None:
-    with atomic_output(path) as tmp:
-        torch.save(payload, tmp)
-
-
 def train_pose_codec(
     poses: np.ndarray | torch.Tensor,
     config: PoseCodecTrainConfig | None = None,
@@ -147,17 +142,8 @@ def train_pose_codec(
     start = 0
     path = Path(checkpoint) if checkpoint is not None else None
     if resume and path is not None and path.is_file():
-        state = torch.load(path, map_location=device, weights_only=True)
-        if state.get("format") != CHECKPOINT_FORMAT:
-            raise ValueError(f"{path}: not a pose codec checkpoint")
-        if state["model_config"] != codec.config():
-            raise ValueError(
-                f"{path}: checkpoint model {state['model_config']} differs from {codec.config()}"
-            )
-        codec.load_state_dict(state["model"])
-        optimizer.load_state_dict(state["optimizer"])
-        generator.set_state(state["generator"])
-        start = int(state["epoch"])
+        state = resume_checkpoint(path, CHECKPOINT_FORMAT, codec, optimizer, generator, device)
+        start = state["epoch"]
         history["epochs"] = list(state["history"]["epochs"])
 
     n = train_features.shape[0]
@@ -186,19 +172,10 @@ def train_pose_codec(
         row["seconds"] = time.perf_counter() - tic
         history["epochs"].append(row)
         if path is not None:
-            _save(
-                path,
-                {
-                    "format": CHECKPOINT_FORMAT,
-                    "model_config": codec.config(),
-                    "model": codec.state_dict(),
-                    "optimizer": optimizer.state_dict(),
-                    "epoch": epoch + 1,
-                    "history": history,
-                    "config": asdict(config),
-                    "generator": generator.get_state(),
-                },
-            )
+            save_checkpoint(
+                path, CHECKPOINT_FORMAT, codec, optimizer, generator, epoch + 1, history,
+                asdict(config),
+            )  # fmt: skip
         if progress is not None:
             progress(epoch + 1, config.epochs, row)
     codec.eval()

@@ -16,13 +16,13 @@ from typing import Any
 import numpy as np
 import torch
 
-from usd_garment.atomic import atomic_output
 from usd_garment.canonical.dataset import CanonicalSet
 from usd_garment.motion.resample import resample_motion
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.regressor.descriptor import MODEL_FPS, descriptor_size, motion_descriptor
 from usd_garment.regressor.gru import GarmentRegressor
 from usd_garment.regressor.pose_code import PoseCodec
+from usd_garment.training.checkpoint import resume_checkpoint, save_checkpoint
 
 #: ``progress(epoch, total, row)``: called after each epoch (1-based) with its history row.
 EpochProgress = Callable[[int, int, dict[str, Any]], None]
@@ -268,11 +268,6 @@ def _decoder_floor_mm(
     return 1000.0 * total / max(count, 1)
 
 
-def _save(path: Path, payload: dict[str, Any]) -> None:
-    with atomic_output(path) as tmp:
-        torch.save(payload, tmp)
-
-
 def train_regressor(
     data: CanonicalSet,
     encode_latent: EncodeLatent,
@@ -357,17 +352,8 @@ def train_regressor(
     start = 0
     path = Path(checkpoint) if checkpoint is not None else None
     if resume and path is not None and path.is_file():
-        state = torch.load(path, map_location=device, weights_only=True)
-        if state.get("format") != CHECKPOINT_FORMAT:
-            raise ValueError(f"{path}: not a regressor checkpoint")
-        if state["model_config"] != model.config():
-            raise ValueError(
-                f"{path}: checkpoint model {state['model_config']} differs from {model.config()}"
-            )
-        model.load_state_dict(state["model"])
-        optimizer.load_state_dict(state["optimizer"])
-        generator.set_state(state["generator"])
-        start = int(state["epoch"])
+        state = resume_checkpoint(path, CHECKPOINT_FORMAT, model, optimizer, generator, device)
+        start = state["epoch"]
         history["epochs"] = list(state["history"]["epochs"])
         history["decoder_floor_mm"] = state["history"].get("decoder_floor_mm")
     if decode is not None and val and history["decoder_floor_mm"] is None:
@@ -419,19 +405,10 @@ def train_regressor(
         row["seconds"] = time.perf_counter() - tic
         history["epochs"].append(row)
         if path is not None:
-            _save(
-                path,
-                {
-                    "format": CHECKPOINT_FORMAT,
-                    "model_config": model.config(),
-                    "model": model.state_dict(),
-                    "optimizer": optimizer.state_dict(),
-                    "epoch": epoch + 1,
-                    "history": history,
-                    "config": asdict(config),
-                    "generator": generator.get_state(),
-                },
-            )
+            save_checkpoint(
+                path, CHECKPOINT_FORMAT, model, optimizer, generator, epoch + 1, history,
+                asdict(config),
+            )  # fmt: skip
         if progress is not None:
             progress(epoch + 1, config.epochs, row)
     model.eval()
