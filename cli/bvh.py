@@ -15,7 +15,7 @@ from usd_garment.cli.options import (
     parse_betas,
     parse_frames,
 )
-from usd_garment.motion.bvh import FLOOR_MODES, UNITS, UP_AXES, load_bvh
+from usd_garment.motion.bvh import ARM_CONTACT_CLEARANCE, FLOOR_MODES, UNITS, UP_AXES, load_bvh
 from usd_garment.usd.body_layer import write_body_layer
 from usd_garment.usd.garment_layer import check_outputs
 
@@ -50,10 +50,20 @@ from usd_garment.usd.garment_layer import check_outputs
     help="body: move the clip so the body stands on y=0; capture: keep the capture's heights.",
 )  # fmt: skip
 @click.option("--frames", default=None, help="Frames A:B of the file (B exclusive).")
+@click.option(
+    "--arm-clearance", type=click.FloatRange(min=0), default=ARM_CONTACT_CLEARANCE,
+    show_default=True,
+    help="Open the shoulders where an arm comes closer than this (m) to the torso, so that the "
+    "arms rest against the trunk instead of passing through it (0: off).",
+)  # fmt: skip
+@click.option(
+    "--no-arm-correction", is_flag=True,
+    help="Keep the captured bone directions of the arms (same as --arm-clearance 0).",
+)  # fmt: skip
 @click.option("--betas", default=None, help="Shape coefficients of the body (default zero).")
 @body_model_option
 @click.option("--no-mesh", is_flag=True, help="Write the skeleton only, without the body mesh.")
-@json_option("Print the joint mapping, units and floor shift as JSON on stdout.")
+@json_option("Print the joint mapping, units, floor shift and shoulder opening as JSON on stdout.")
 def import_bvh(
     bvh: Path,
     output: Path,
@@ -63,6 +73,8 @@ def import_bvh(
     up_axis: str,
     floor: str,
     frames: str | None,
+    arm_clearance: float,
+    no_arm_correction: bool,
     betas: str | None,
     body_model: Path | None,
     no_mesh: bool,
@@ -79,6 +91,7 @@ def import_bvh(
         motion, info = load_bvh(
             bvh, body, fps, beta_values, units=units, scale=scale, up_axis=up_axis,
             floor=floor, frames=frame_range,
+            arm_clearance=None if no_arm_correction else arm_clearance,
         )  # fmt: skip
         write_body_layer(output, motion, body, with_mesh=not no_mesh)
     if as_json:
@@ -94,6 +107,8 @@ def import_bvh(
             "up_axis": info.up_axis,
             "floor": info.floor,
             "floor_shift_m": round(info.floor_shift_m, 4),
+            "arm_clearance_m": info.arm_clearance_m,
+            "shoulder_opening": info.opening_summary(),
             "joint_map": info.joint_map,
             "drivers": {k: v for k, v in info.drivers.items() if v != info.joint_map[k]},
             "unmapped": info.unmapped,
@@ -102,9 +117,16 @@ def import_bvh(
         }
         click.echo(json.dumps(summary, indent=2))
         return
+    opened = ""
+    if info.arm_clearance_m is not None:
+        summary = info.opening_summary()
+        opened = (
+            f"; shoulders opened up to {summary['max_deg']:.1f}° (mean {summary['mean_deg']:.1f}°, "
+            f"{summary['frames']} frames) to keep {1000 * info.arm_clearance_m:g} mm clear"
+        )
     unit = f"{info.units}{' (detected)' if info.units_detected else ''}"
     click.echo(
         f"wrote {output}: {motion.num_frames} frames at {motion.fps:g} fps; units {unit}, "
         f"skeleton {info.height_m:.2f} m tall, {len(info.joint_map)}/24 SMPL joints mapped, "
-        f"floor shift {info.floor_shift_m:+.3f} m"
+        f"floor shift {info.floor_shift_m:+.3f} m{opened}"
     )

@@ -1,5 +1,6 @@
 """Contact sheet of BVH motion captures retargeted to SMPL: a few frames of each clip on the
-default body, with the BVH skeleton drawn over it (black lines, dots at the mapped joints).
+default body, with the BVH skeleton drawn over it (black lines, dots at the mapped joints); the
+shoulders are opened where the arms would pass through the trunk (``load_bvh``'s default).
 
 Run: ``python examples/plot_bvh.py [-o docs/mocap.png] [FILE.bvh ...]`` (default: CMU clips
 131_01 and 131_03 from ``/work/shared/mocap``).
@@ -81,8 +82,9 @@ def main() -> None:
             if col == 0:
                 ax.set_ylabel(f"{path.stem}\n{view_name}", fontsize=8)
     fig.suptitle(
-        "BVH captures retargeted to SMPL (default body); black: the BVH skeleton in its own "
-        "proportions, same hips; grey: floor y=0",
+        "BVH captures retargeted to SMPL (default body, shoulders opened where an arm would pass "
+        "through the trunk); black: the BVH skeleton in its own proportions, same hips; "
+        "grey: floor y=0",
         fontsize=10,
     )
     fig.tight_layout(rect=(0, 0, 1, 0.98))

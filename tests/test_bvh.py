@@ -1,8 +1,10 @@
 """BVH import: parsing and Euler conventions, joint mapping (CMU, Mixamo, SMPL names), rest
-corrections, units, root translation, a real CMU clip through the CLI, and bad input."""
+corrections, units, root translation, the shoulder opening that keeps the arms out of the trunk,
+a real CMU clip through the CLI, and bad input."""
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,6 +20,7 @@ from usd_garment.body.model import BodyModel
 from usd_garment.cli.main import main
 from usd_garment.motion.amass import ZUP_TO_YUP
 from usd_garment.motion.bvh import (
+    ARM_CONTACT_CLEARANCE,
     BvhClip,
     BvhError,
     BvhRetarget,
@@ -32,6 +35,7 @@ from usd_garment.motion.bvh import (
     up_rotation,
     world_motion,
 )
+from usd_garment.motion.procedural import arm_clearance, arm_inside
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.usd.read import read_smpl_motion
 
@@ -245,16 +249,24 @@ def test_rest_pose_gives_the_bvh_rest_bone_directions(body_model: BodyModel) -> 
     real.values = np.zeros((2, real.values.shape[1]))  # the file's rest pose
     synthetic = parse_bvh(bvh_text(cmu_skeleton(), {}, np.zeros((2, 3))))
     for clip in (real, synthetic):
-        motion, info = retarget(clip, body_model, floor="capture")
+        motion, info = retarget(clip, body_model, floor="capture", arm_clearance=None)
         errors = bone_errors(clip, motion, info, body_model)
         assert set(EXACT_BONES) <= set(errors)
         worst = {k: float(v.max()) for k, v in errors.items() if not k.startswith("pelvis>")}
         assert max(worst.values()) < 1e-3, worst
     # the real CMU rest has the arms hanging down: so do SMPL's (T-pose arms turned by 90°)
-    joints = posed_joints(body_model, retarget(real, body_model)[0])[0]
+    captured = retarget(real, body_model, arm_clearance=None)[0]
+    joints = posed_joints(body_model, captured)[0]
     for side in ("left", "right"):
         arm = joints[J[f"{side}_elbow"]] - joints[J[f"{side}_shoulder"]]
         assert angle_deg(arm, np.array([0.0, -1.0, 0.0])) < 1.0
+    # ... into the default body's wider trunk, until the shoulders open just enough
+    betas = captured.betas
+    assert arm_inside(body_model, betas, captured.pose).min() > 0.5
+    opened, info = retarget(real, body_model)
+    assert arm_inside(body_model, betas, opened.pose).max() < 0.03  # a hand grazing the thigh
+    assert arm_clearance(body_model, betas, opened.pose).min() >= ARM_CONTACT_CLEARANCE
+    assert 5.0 < info.opening_summary()["max_deg"] < 30.0
 
 
 def test_t_pose_rig_maps_to_the_zero_pose(body_model: BodyModel, tmp_path: Path) -> None:
@@ -264,6 +276,7 @@ def test_t_pose_rig_maps_to_the_zero_pose(body_model: BodyModel, tmp_path: Path)
                  bvh_text(mixamo_skeleton(rest), {}, np.repeat(hips[None], 3, axis=0)))  # fmt: skip
     motion, info = load_bvh(path, body_model, floor="capture")
     assert info.units == "cm" and info.units_detected and info.scale == 0.01
+    assert info.shoulder_opening is not None and not info.shoulder_opening.any()  # arms clear
     assert not info.unmapped and motion.fps == 120.0
     np.testing.assert_allclose(motion.pose, 0.0, atol=1e-5)
     np.testing.assert_allclose(motion.trans, [[0.0, 1.2, 0.0]] * 3, atol=1e-5)
@@ -294,7 +307,7 @@ def test_elbow_bend_and_random_poses_keep_bone_directions(body_model: BodyModel)
     root = np.stack([np.linspace(0.0, 0.3, frames), np.full(frames, 0.95),
                      np.linspace(0.0, 1.0, frames)], axis=1)  # fmt: skip
     clip = parse_bvh(bvh_text(skeleton, angles, root))
-    motion, info = retarget(clip, body_model, floor="capture")
+    motion, info = retarget(clip, body_model, floor="capture", arm_clearance=None)
     assert info.units == "m" and not info.unmapped
     assert {"LHipJoint", "RHipJoint", "Neck1"} <= set(info.folded)
     assert {"LThumb", "RThumb"} == set(info.ignored)
@@ -327,13 +340,13 @@ def test_units_and_up_axis_do_not_change_the_motion(body_model: BodyModel) -> No
                   for j in mixamo_skeleton(rest, cm=False)]  # fmt: skip
     zup_angles = {k: v * [-1.0, 1.0, 1.0] for k, v in angles.items()}
     zup = parse_bvh(bvh_text(zup_joints, zup_angles, root @ ZUP_TO_YUP))
-    results = [retarget(c, body_model) for c in (cm, m, zup)]
+    results = [retarget(c, body_model, arm_clearance=None) for c in (cm, m, zup)]
     assert [r[1].units for r in results] == ["cm", "m", "m"]
     assert [r[1].up_axis for r in results] == ["y", "y", "z"]
     for motion, _ in results[1:]:
         np.testing.assert_allclose(motion.pose, results[0][0].pose, atol=2e-5)
         np.testing.assert_allclose(motion.trans, results[0][0].trans, atol=2e-5)
-    scaled, info = retarget(cm, body_model, scale=0.01)
+    scaled, info = retarget(cm, body_model, scale=0.01, arm_clearance=None)
     assert info.units == "custom" and not info.units_detected
     np.testing.assert_allclose(scaled.pose, results[0][0].pose, atol=1e-6)
     tiny = parse_bvh(bvh_text(mixamo_skeleton(rest * 0.1, cm=False), {}, root * 0.1))
@@ -359,8 +372,12 @@ def test_real_cmu_clip_through_the_cli(body_model: BodyModel, tmp_path: Path) ->
     _, positions, _ = world_motion(clip, info.scale, up_rotation(info.up_axis), slice(0, 60, 4))
     errors = bone_angle_errors(positions, posed_joints(body_model, motion),
                                map_joints(clip.skeleton))  # fmt: skip
+    opened = np.degrees(info.shoulder_opening).max()
+    assert opened > 1.0  # the arms hang into the default body's trunk: opened
     for bone in (*EXACT_BONES, "spine3>neck", "neck>head"):
-        assert errors[bone].max() < 0.01, (bone, errors[bone].max())
+        arm = bone.split(">")[0].endswith(("shoulder", "elbow", "wrist"))
+        limit = opened + 0.01 if arm else 0.01  # the arm below the shoulder turns with it
+        assert errors[bone].max() < limit, (bone, errors[bone].max())
     # walking forward (+Z) with the feet on the floor, head up
     joints = posed_joints(body_model, motion)
     assert joints[:, J["head"], 1].min() > 1.3 and joints[:, J["left_ankle"], 1].max() < 0.3
@@ -369,6 +386,79 @@ def test_real_cmu_clip_through_the_cli(body_model: BodyModel, tmp_path: Path) ->
                                        "0:8", "--json", "--no-mesh"])  # fmt: skip
     assert result.exit_code == 0, result.output
     assert '"frames": 8' in result.stdout and '"left_collar": "LeftCollar"' in result.stdout
+
+
+def swinging_arms(frames: int = 45, fps: float = 30.0) -> BvhClip:
+    """CMU skeleton whose arms hang 60° below horizontal (clear of the body) for 0.5 s, then
+    swing in to 95° (straight down and into the trunk) at 1 s and back out at 1.5 s."""
+    t = np.arange(frames) / fps
+    down = -60.0 - 35.0 * np.clip(np.sin(np.pi * (t - 0.5)), 0.0, None)
+    zero = np.zeros(frames)
+    angles = {"LeftArm": np.stack([down, zero, zero], axis=1),  # ZXY: Z first
+              "RightArm": np.stack([-down, zero, zero], axis=1)}  # fmt: skip
+    root = np.tile([0.0, 0.95, 0.0], (frames, 1))
+    return parse_bvh(bvh_text(cmu_skeleton(), angles, root, fps=fps))
+
+
+def test_shoulders_open_just_enough_smoothly_where_the_arms_enter_the_trunk(
+    body_model: BodyModel,
+) -> None:
+    clip = swinging_arms()
+    captured, off = retarget(clip, body_model, arm_clearance=None)
+    assert off.arm_clearance_m is None and not off.shoulder_opening.any()
+    betas = captured.betas
+    assert arm_inside(body_model, betas, captured.pose[20:25]).max() > 0.5  # into the trunk
+    motion, info = retarget(clip, body_model)
+    assert info.arm_clearance_m == ARM_CONTACT_CLEARANCE
+    assert arm_inside(body_model, betas, motion.pose[10::4]).max() == 0.0
+    gaps = arm_clearance(body_model, betas, motion.pose)
+    assert gaps.min() >= ARM_CONTACT_CLEARANCE and gaps.min() < 0.02  # still close: contact
+    opening = info.shoulder_opening
+    # nothing where the arms are clear (the first 0.2 s: the tail of the smoothing, < 0.03°),
+    # left and right alike
+    assert not opening[0].any() and opening[:6].max() < 5e-4
+    np.testing.assert_allclose(motion.pose[:6], captured.pose[:6], atol=5e-4)
+    np.testing.assert_allclose(opening[:, 0], opening[:, 1], atol=1e-6)
+    # smooth: no step of the opening's ARM_STEP (0.05 rad) size between frames
+    assert 0.2 < opening.max() < 0.7
+    assert np.abs(np.diff(opening, 2, axis=0)).max() < 0.02
+    # only the shoulders turn, outwards about the collar's forward axis
+    changed = np.flatnonzero(np.abs(motion.pose - captured.pose).max(axis=(0, 2)) > 1e-6)
+    assert [SMPL_JOINT_NAMES[j] for j in changed] == ["left_shoulder", "right_shoulder"]
+    joints = posed_joints(body_model, motion)[20]
+    before = posed_joints(body_model, captured)[20]
+    assert joints[J["left_elbow"], 0] > before[J["left_elbow"], 0] + 0.02  # left is +X
+    assert joints[J["right_elbow"], 0] < before[J["right_elbow"], 0] - 0.02
+
+
+def test_arm_clearance_options_of_the_cli(tmp_path: Path) -> None:
+    # four frames with the arms straight down, into the trunk
+    source = write(tmp_path / "swing.bvh", bvh_text(
+        cmu_skeleton(), {"LeftArm": np.tile([-95.0, 0.0, 0.0], (4, 1)),
+                         "RightArm": np.tile([95.0, 0.0, 0.0], (4, 1))},
+        np.tile([0.0, 0.95, 0.0], (4, 1))))  # fmt: skip
+    runs = {}
+    options = {"default": [], "wider": ["--arm-clearance", "0.02"],
+               "zero": ["--arm-clearance", "0"], "off": ["--no-arm-correction"]}  # fmt: skip
+    for name, extra in options.items():
+        args = ["import-bvh", str(source), "-o", str(tmp_path / f"{name}.usda"), "--json"]
+        result = CliRunner().invoke(main, args + extra)
+        assert result.exit_code == 0, result.output
+        runs[name] = json.loads(result.stdout)
+    assert runs["default"]["arm_clearance_m"] == ARM_CONTACT_CLEARANCE
+    assert runs["default"]["shoulder_opening"]["frames"] == 4
+    assert 10.0 < runs["default"]["shoulder_opening"]["max_deg"] < 40.0
+    wider = runs["wider"]["shoulder_opening"]["max_deg"]
+    assert wider > runs["default"]["shoulder_opening"]["max_deg"] + 2.0
+    for name in ("zero", "off"):
+        assert runs[name]["arm_clearance_m"] is None
+        assert runs[name]["shoulder_opening"] == {"mean_deg": 0.0, "max_deg": 0.0, "frames": 0}
+    result = CliRunner().invoke(main, ["import-bvh", str(source), "-o",
+                                       str(tmp_path / "t.usda")])  # fmt: skip
+    assert "shoulders opened up to" in result.stdout and "to keep 5 mm clear" in result.stdout
+    result = CliRunner().invoke(main, ["import-bvh", str(source), "-o", str(tmp_path / "n.usda"),
+                                       "--arm-clearance", "-1"])  # fmt: skip
+    assert result.exit_code == 2 and "--arm-clearance" in result.output
 
 
 def _truncated(tmp: Path) -> Path:

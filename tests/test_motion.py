@@ -29,6 +29,7 @@ from usd_garment.motion.procedural import (
     arm_clearance,
     blend_in,
     make_motion,
+    open_shoulders,
     random_betas,
 )
 from usd_garment.motion.sequence import SmplMotion
@@ -247,6 +248,27 @@ def test_shoulders_open_on_request_to_keep_clear_of_a_heavy_torso(body_model: Bo
     assert euler[:, J["left_shoulder"], 2].min() > mean[:, J["left_shoulder"], 2].min() + 0.05
     assert euler[:, J["right_shoulder"], 2].max() < mean[:, J["right_shoulder"], 2].max() - 0.05
     assert np.abs(np.diff(euler[:, 1:], n=2, axis=0)).max() < 0.05  # still smooth
+
+
+def test_open_shoulders_leaves_clear_arms_and_opens_about_the_collars_forward_axis(
+    body_model: BodyModel,
+) -> None:
+    betas = np.zeros(10, dtype=np.float32)
+    t_pose = np.zeros((3, 24, 3))
+    pose, opening = open_shoulders(body_model, betas, t_pose, 30.0)  # arms clear: unchanged
+    assert not opening.any()
+    np.testing.assert_array_equal(pose, t_pose)
+    hanging = np.zeros((3, 24, 3))
+    hanging[:, J["left_shoulder"]] = [0.0, 0.0, -1.7]  # down, a little inwards
+    hanging[:, J["right_shoulder"]] = [0.0, 0.0, 1.7]
+    assert arm_clearance(body_model, betas, hanging).min() < 0.005  # touching
+    pose, opening = open_shoulders(body_model, betas, hanging, 30.0, 0.005)
+    assert arm_clearance(body_model, betas, pose).min() >= 0.005
+    assert (opening > 0).all()
+    np.testing.assert_allclose(pose[:, J["left_shoulder"], 2], -1.7 + opening[:, 0], atol=1e-9)
+    np.testing.assert_allclose(pose[:, J["right_shoulder"], 2], 1.7 - opening[:, 1], atol=1e-9)
+    others = [j for j in range(24) if j not in (J["left_shoulder"], J["right_shoulder"])]
+    np.testing.assert_array_equal(pose[:, others], hanging[:, others])
 
 
 def test_betas_and_bad_arguments(body_model: BodyModel) -> None:

@@ -22,7 +22,11 @@ Retargeting works on world (global) rotations, so BVH joints that SMPL lacks (CM
    ``G_smpl = G_bvh · C_j``, and SMPL's bones point along the BVH's in any pose.
 3. SMPL local rotations follow in SMPL's hierarchy, ``R_local = G_parent^T · G``; SMPL joints
    without a BVH counterpart get the identity.
-4. The SMPL pelvis follows the BVH hips: ``trans = hips_world − J0`` (SMPL's root rotation pivots
+4. Where the body's proportions put an arm through the trunk (the capture's shoulders sit where
+   the body's trunk is wider), the shoulders open outwards, smoothly over time, until each arm
+   keeps :data:`ARM_CONTACT_CLEARANCE` from the torso
+   (:func:`usd_garment.motion.procedural.open_shoulders`); arms may still rest against it.
+5. The SMPL pelvis follows the BVH hips: ``trans = hips_world − J0`` (SMPL's root rotation pivots
    about the rest pelvis J0), then shifted vertically so that the body stands on y = 0
    (:func:`floor_height`; bone lengths differ, so the capture's own floor would not fit).
 """
@@ -44,6 +48,7 @@ from usd_garment.body.betas import MAX_ABS_BETA, as_betas
 from usd_garment.body.joints import NUM_JOINTS, SMPL_JOINT_NAMES, SMPL_PARENTS
 from usd_garment.body.model import BodyModel
 from usd_garment.motion.amass import ZUP_TO_YUP, rest_pelvis
+from usd_garment.motion.procedural import open_shoulders, turn_shoulders
 from usd_garment.motion.resample import resample_motion
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.usd.joint_aliases import normalize_joint_name
@@ -64,6 +69,15 @@ FLOOR_MODES: tuple[str, ...] = ("body", "capture")
 #: most frames it poses to find it.
 FLOOR_PERCENTILE = 10.0
 FLOOR_SAMPLES = 300
+
+#: Default smallest distance (m) between the vertices of an arm and of the torso that the
+#: retargeted motion keeps, opening the shoulders where needed (``arm_clearance``): small enough
+#: for the arms to rest against the trunk, large enough that no arm passes through it (nearest
+#: vertices closer than this are where the surfaces cross).
+ARM_CONTACT_CLEARANCE = 0.005
+#: Most frames per second at which the arm clearance is measured; the opening is interpolated
+#: between (it is smoothed over 0.2 s anyway).
+ARM_CHECK_FPS = 30.0
 
 #: Up axes of the BVH file ``up_axis`` accepts (``"auto"``: the rest skeleton's hips→head axis).
 UP_AXES: tuple[str, ...] = ("auto", "y", "z")
@@ -182,6 +196,9 @@ class BvhRetarget:
         floor_shift_m: vertical shift added to the capture's heights (m).
         source_fps: the file's frame rate.
         rest_corrections: ``(24, 3, 3)`` rest corrections ``C_j`` (column convention).
+        arm_clearance_m: the clearance the shoulders were opened to keep (None: off).
+        shoulder_opening: ``(T, 2)`` rad, how far each shoulder (left, right) was opened per
+            frame of the motion (zeros when off).
     """
 
     joint_map: dict[str, str]
@@ -198,6 +215,22 @@ class BvhRetarget:
     floor_shift_m: float
     source_fps: float
     rest_corrections: np.ndarray
+    arm_clearance_m: float | None = None
+    shoulder_opening: np.ndarray | None = None
+
+    def opening_summary(self, threshold_deg: float = 0.1) -> dict[str, float | int]:
+        """Shoulder opening in degrees over both sides: ``mean``, ``max``, and ``frames`` (how
+        many frames either side opens by more than ``threshold_deg``)."""
+        deg = np.degrees(
+            np.zeros((0, 2)) if self.shoulder_opening is None else self.shoulder_opening
+        )
+        if deg.size == 0:
+            return {"mean_deg": 0.0, "max_deg": 0.0, "frames": 0}
+        return {
+            "mean_deg": round(float(deg.mean()), 2),
+            "max_deg": round(float(deg.max()), 2),
+            "frames": int(np.count_nonzero(deg.max(axis=1) > threshold_deg)),
+        }
 
 
 # --------------------------------------------------------------------------------------------
@@ -780,6 +813,7 @@ def retarget(
     up_axis: str = "auto",
     floor: str = "body",
     frames: tuple[int, int] | None = None,
+    arm_clearance: float | None = ARM_CONTACT_CLEARANCE,
 ) -> tuple[SmplMotion, BvhRetarget]:
     """Retarget a parsed BVH clip to an SMPL motion on ``body`` at the clip's frame rate.
 
@@ -793,6 +827,9 @@ def retarget(
         up_axis: ``"y"``, ``"z"`` or ``"auto"`` (the rest skeleton's hips→head axis).
         floor: ``"body"`` or ``"capture"`` (:data:`FLOOR_MODES`).
         frames: frames ``(A, B)`` of the file to keep (B exclusive); all by default.
+        arm_clearance: open the shoulders wherever an arm comes closer than this (m) to the
+            torso (:func:`~usd_garment.motion.procedural.open_shoulders`, measured at most
+            :data:`ARM_CHECK_FPS` times a second); 0 or None: bone directions as captured.
 
     Returns:
         The motion (pose ``(T, 24, 3)`` axis-angle rad, trans ``(T, 3)`` m, Y-up) and a record of
@@ -800,9 +837,11 @@ def retarget(
 
     Raises:
         BvhError: a skeleton that does not map to SMPL, unknown units, axis or floor mode, a bad
-            scale, frame range or betas.
+            scale, frame range, betas or arm clearance.
     """
     sk = clip.skeleton
+    if arm_clearance is not None and not (math.isfinite(arm_clearance) and arm_clearance >= 0):
+        raise BvhError(f"the arm clearance must be a distance (m) >= 0, got {arm_clearance}")
     if floor not in FLOOR_MODES:
         raise BvhError(f"unknown floor mode '{floor}' (expected {', '.join(FLOOR_MODES)})")
     if up_axis not in UP_AXES:
@@ -850,6 +889,14 @@ def retarget(
             world[:, j] = world[:, parent] if parent >= 0 else np.eye(3)
         local = world[:, j] if parent < 0 else np.swapaxes(world[:, parent], 1, 2) @ world[:, j]
         pose[:, j] = Rotation.from_matrix(local.reshape(-1, 3, 3)).as_rotvec().reshape(t, 3)
+    opening = np.zeros((t, 2))
+    if arm_clearance:
+        stride = max(1, math.floor(clip.fps / ARM_CHECK_FPS + 1e-6))
+        checked = np.unique(np.r_[np.arange(0, t, stride), t - 1])  # the last one too
+        _, sparse = open_shoulders(body, betas64, pose[checked], clip.fps / stride, arm_clearance)
+        frames_all = np.arange(t)
+        opening = np.stack([np.interp(frames_all, checked, sparse[:, k]) for k in (0, 1)], 1)
+        pose = turn_shoulders(pose, opening)
     pelvis = mapping[0]
     assert pelvis is not None
     trans = positions[:, pelvis] - rest_pelvis(body, betas64)
@@ -883,6 +930,8 @@ def retarget(
         floor_shift_m=shift,
         source_fps=clip.fps,
         rest_corrections=plan.corrections,
+        arm_clearance_m=float(arm_clearance) if arm_clearance else None,
+        shoulder_opening=opening,
     )
     return motion, info
 
@@ -927,6 +976,7 @@ def load_bvh(
     up_axis: str = "auto",
     floor: str = "body",
     frames: tuple[int, int] | None = None,
+    arm_clearance: float | None = ARM_CONTACT_CLEARANCE,
 ) -> tuple[SmplMotion, BvhRetarget]:
     """Read a BVH file as an SMPL motion on ``body`` (Y-up, metres), optionally resampled.
 
@@ -934,7 +984,8 @@ def load_bvh(
         path: the ``.bvh`` file.
         body: see :func:`retarget`.
         fps: resample to this frame rate (slerp / lerp); the file's rate by default.
-        betas, units, scale, up_axis, floor, frames: see :func:`retarget`.
+        betas, units, scale, up_axis, floor, frames, arm_clearance: see :func:`retarget`
+            (``info.shoulder_opening`` follows the resampled frames).
 
     Raises:
         BvhError: see :func:`read_bvh` and :func:`retarget`.
@@ -942,11 +993,22 @@ def load_bvh(
     """
     clip = read_bvh(path)
     try:
-        motion, info = retarget(clip, body, betas, units=units, scale=scale, up_axis=up_axis,
-                                floor=floor, frames=frames)  # fmt: skip
+        motion, info = retarget(
+            clip, body, betas, units=units, scale=scale, up_axis=up_axis, floor=floor,
+            frames=frames, arm_clearance=arm_clearance,
+        )  # fmt: skip
     except BvhError as exc:
         raise BvhError(f"{path}: {exc}") from None
-    return (motion if fps is None else resample_motion(motion, fps)), info
+    if fps is None:
+        return motion, info
+    resampled = resample_motion(motion, fps)
+    if info.shoulder_opening is not None and resampled is not motion:
+        source = np.arange(resampled.num_frames) / resampled.fps * motion.fps
+        frames_in = np.arange(motion.num_frames)
+        info.shoulder_opening = np.stack(
+            [np.interp(source, frames_in, info.shoulder_opening[:, k]) for k in (0, 1)], axis=1
+        )
+    return resampled, info
 
 
 def bone_angle_errors(

@@ -385,11 +385,11 @@ def make_motion(
     t = np.arange(frames) / fps
     weight = blend_in(t)
     plan = _GENERATORS[kind](t, np.random.default_rng(seed))
-    euler = plan.euler * weight[:, None, None]
+    pose = euler_to_pose(plan.euler * weight[:, None, None])
     if open_shoulders:
-        euler = _open_arms(body, shape, euler, weight, fps)
+        pose = _open_shoulders(body, shape, pose, fps, weight=weight, limits=True)[0]
     heading = np.concatenate([[0.0], np.cumsum(plan.yaw_rate * weight[1:]) / fps])
-    pose = clamp_to_limits(euler_to_pose(euler))
+    pose = clamp_to_limits(pose)
     root = Rotation.from_rotvec(heading[:, None] * [0.0, 1.0, 0.0]) * Rotation.from_rotvec(
         pose[:, 0]
     )
@@ -443,32 +443,118 @@ def arm_clearance(body: BodyModel, betas: np.ndarray, pose: np.ndarray) -> np.nd
     gaps = np.empty((len(pose), 2))
     for f in range(len(pose)):
         tree = cKDTree(posed[f, torso])
-        gaps[f] = [tree.query(posed[f, arm])[0].min() for arm in arms]
+        for k, arm in enumerate(arms):
+            points = posed[f, arm]
+            # A bound from every 16th vertex prunes the exact search of all of them.
+            bound = tree.query(points[::16])[0].min()
+            gaps[f, k] = tree.query(points, distance_upper_bound=bound * (1 + 1e-6) + 1e-9)[0].min()
     return gaps
 
 
-def _open_arms(
-    body: BodyModel, betas: np.ndarray, euler: np.ndarray, weight: np.ndarray, fps: float
-) -> np.ndarray:
-    """``euler`` ``(T, 24, 3)`` with the shoulders opened sideways wherever an arm is closer
-    than :data:`ARM_CLEARANCE` to the torso: the opening of each side grows by
-    :data:`ARM_STEP` rad at the frames still too close, spread over neighbouring frames (a
-    running maximum and a Gaussian over :data:`ARM_SMOOTHING`) and faded in with the blend-in
-    ``weight`` ``(T,)``, for at most :data:`ARM_STEPS` steps."""
-    need = np.zeros((len(euler), 2))
-    opened = euler
+def arm_inside(body: BodyModel, betas: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    """Share of each arm's vertices inside the body, per frame: ``(T, 2)`` (left, right) in
+    [0, 1] for ``pose`` ``(T, 24, 3)`` axis-angle on ``body`` at ``betas`` ``(10,)``.
+
+    The arm vertices are those of :func:`arm_clearance`; a vertex is inside where its
+    generalized winding number against the posed body without that arm's own faces (the faces
+    touching a vertex skinned mostly to the arm's shoulder, elbow, wrist or hand) exceeds 0.5:
+    an arm passing through the trunk, a thigh or the other arm. Arms resting against the
+    body count as outside.
+    """
+    from usd_garment.eval.body_distance import WINDING_INSIDE, winding_numbers
+
+    dominant = body.weights.argmax(dim=1).numpy()
+    faces = body.faces.numpy()
+    with torch.no_grad():
+        out = body(torch.as_tensor(betas, dtype=torch.float32), torch.as_tensor(pose).float())
+    rest = out.rest_vertices.reshape(-1, body.num_vertices, 3)[0].numpy()
+    posed = out.vertices.double().numpy()
+    torso = np.isin(dominant, [_J[name] for name in _TORSO_JOINTS])
+    shares = np.empty((len(pose), 2))
+    for s, side in enumerate(("left", "right")):
+        limb = np.isin(dominant, [_J[f"{side}_{part}"] for part in _ARM_JOINTS])
+        arm = limb.copy()
+        arm[arm] = cKDTree(rest[torso]).query(rest[arm])[0] >= ARM_ROOT
+        others = faces[~limb[faces].any(axis=1)]
+        for f in range(len(pose)):
+            shares[f, s] = np.mean(
+                winding_numbers(posed[f, arm], posed[f], others) > WINDING_INSIDE
+            )
+    return shares
+
+
+def open_shoulders(
+    body: BodyModel,
+    betas: np.ndarray,
+    pose: np.ndarray,
+    fps: float,
+    clearance: float = ARM_CLEARANCE,
+    *,
+    weight: np.ndarray | None = None,
+    limits: bool = False,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Open the shoulders of ``pose`` wherever an arm comes closer than ``clearance`` to the
+    torso (:func:`arm_clearance`).
+
+    Each upper arm turns outwards about the forward axis (Z) of its parent's frame, the
+    collar's: ``R_shoulder ← Rz(+a) · R_shoulder`` on the left, ``Rz(−a)`` on the right (the
+    ``ez`` Euler angle of :mod:`usd_garment.motion.joint_limits`). The opening ``a`` of each side
+    grows by :data:`ARM_STEP` rad at the frames still too close, spread over neighbouring
+    frames (a running maximum over ±:data:`ARM_SMOOTHING` and a Gaussian), for at most
+    :data:`ARM_STEPS` steps; where the arms are clear it stays zero.
+
+    Args:
+        body: the body model.
+        betas: ``(10,)`` its shape.
+        pose: ``(T, 24, 3)`` axis-angle (rad).
+        fps: frame rate (the smoothing is in seconds).
+        clearance: smallest distance (m) between an arm's vertices and the torso's.
+        weight: ``(T,)`` factor on the opening (e.g. a blend-in from the rest pose); ones by
+            default.
+        limits: measure the clearance on the pose clamped to the joint limits
+            (:func:`~usd_garment.motion.joint_limits.clamp_to_limits`), as it will be used.
+
+    Returns:
+        The opened pose ``(T, 24, 3)`` float64 (not clamped) and the opening ``(T, 2)`` (rad,
+        ≥ 0, left and right).
+    """
+    pose = np.asarray(pose, dtype=np.float64)
+    frames = len(pose)
+    weight = np.ones(frames) if weight is None else np.asarray(weight, dtype=np.float64)
+    need = np.zeros((frames, 2))
+    lift = np.zeros((frames, 2))
+    gaps = np.empty((frames, 2))
+    opened = pose
     width = max(round(ARM_SMOOTHING * fps), 1)
+    changed = np.arange(frames)
     for _ in range(ARM_STEPS):
-        short = arm_clearance(body, betas, clamp_to_limits(euler_to_pose(opened))) < ARM_CLEARANCE
+        if changed.size:  # the other frames keep their pose and their clearance
+            moved = opened[changed]
+            gaps[changed] = arm_clearance(body, betas, clamp_to_limits(moved) if limits else moved)
+        short = gaps < clearance
         if not short.any():
             break
         need += ARM_STEP * short
         spread = gaussian_filter1d(maximum_filter1d(need, 2 * width + 1, axis=0), width / 2, axis=0)
-        lift = spread * weight[:, None]
-        opened = euler.copy()
-        opened[:, _J["left_shoulder"], 2] += lift[:, 0]  # left arm up: +z, the right mirrored
-        opened[:, _J["right_shoulder"], 2] -= lift[:, 1]
-    return opened
+        new = spread * weight[:, None]
+        changed = np.flatnonzero((new != lift).any(axis=1))
+        lift = new
+        opened = turn_shoulders(pose, lift)
+    return opened, lift
+
+
+_open_shoulders = open_shoulders  # make_motion's flag of the same name hides it
+
+
+def turn_shoulders(pose: np.ndarray, lift: np.ndarray) -> np.ndarray:
+    """``pose`` ``(T, 24, 3)`` with the left shoulder turned by ``Rz(lift[:, 0])`` and the right
+    by ``Rz(−lift[:, 1])`` in their parents' frames (``lift`` ``(T, 2)`` rad)."""
+    turned = pose.copy()
+    for side, (name, sign) in enumerate((("left_shoulder", 1.0), ("right_shoulder", -1.0))):
+        j = _J[name]
+        rz = Rotation.from_rotvec(sign * lift[:, side, None] * [0.0, 0.0, 1.0])
+        turned[:, j] = (rz * Rotation.from_rotvec(pose[:, j])).as_rotvec()
+    return turned
 
 
 def _sole_points(body: BodyModel, betas: np.ndarray, pose: np.ndarray) -> np.ndarray:
