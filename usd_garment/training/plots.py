@@ -23,7 +23,7 @@ def _pyplot() -> Any:
 
 #: Curves drawn per stage: (history key, label).
 CURVES: dict[str, tuple[tuple[str, str], ...]] = {
-    "pose": (("loss", "train loss"), ("val_mse", "validation feature MSE")),
+    "pose": (("train_mse", "train feature MSE"), ("val_mse", "validation feature MSE")),
     "vae": (
         ("rec", "train L_rec (m per garment)"),
         ("collision_random", "train L_col, random z"),
@@ -31,7 +31,7 @@ CURVES: dict[str, tuple[tuple[str, str], ...]] = {
         ("val_rand_inside_pct", "validation random z inside (%)"),
     ),
     "regressor": (
-        ("loss", "train loss"),
+        ("train_loss", "train loss"),
         ("val_pos", "validation L_pos"),
         ("val_vertex_mm", "validation vertex error (mm)"),
     ),
