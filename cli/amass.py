@@ -9,7 +9,12 @@ import click
 
 from usd_garment.body import load_body_model
 from usd_garment.cli.errors import user_errors
-from usd_garment.cli.options import body_model_option, skeleton_option
+from usd_garment.cli.options import (
+    body_layer_output_option,
+    body_model_option,
+    resample_fps_option,
+    skeleton_option,
+)
 from usd_garment.motion.amass import load_amass, save_amass
 from usd_garment.usd.body_layer import write_body_layer
 from usd_garment.usd.read import read_smpl_motion
@@ -19,17 +24,8 @@ USD_SUFFIXES = (".usd", ".usda", ".usdc")
 
 @click.command("import-amass")
 @click.argument("npz", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.option(
-    "-o",
-    "--output",
-    type=click.Path(dir_okay=False, path_type=Path),
-    required=True,
-    help="USD body layer to write (.usda, .usdc or .usd).",
-)
-@click.option(
-    "--fps", type=click.FloatRange(min=0, min_open=True), default=None,
-    help="Resample to this frame rate (default: the file's mocap frame rate).",
-)  # fmt: skip
+@body_layer_output_option
+@resample_fps_option
 @body_model_option
 def import_amass(npz: Path, output: Path, fps: float | None, body_model: Path | None) -> None:
     """Convert an AMASS motion (.npz, Z-up) into a USD body layer (Y-up, metres)."""

@@ -10,10 +10,12 @@ import click
 from usd_garment.body import load_body_model
 from usd_garment.cli.errors import user_errors
 from usd_garment.cli.options import (
+    body_layer_output_option,
     body_model_option,
     json_option,
     parse_betas,
     parse_frames,
+    resample_fps_option,
 )
 from usd_garment.motion.bvh import ARM_CONTACT_CLEARANCE, FLOOR_MODES, UNITS, UP_AXES, load_bvh
 from usd_garment.usd.body_layer import write_body_layer
@@ -22,17 +24,8 @@ from usd_garment.usd.garment_layer import check_outputs
 
 @click.command("import-bvh")
 @click.argument("bvh", type=click.Path(dir_okay=False, path_type=Path))
-@click.option(
-    "-o",
-    "--output",
-    type=click.Path(dir_okay=False, path_type=Path),
-    required=True,
-    help="USD body layer to write (.usda, .usdc or .usd).",
-)
-@click.option(
-    "--fps", type=click.FloatRange(min=0, min_open=True), default=None,
-    help="Resample to this frame rate (default: the file's frame rate, as import-amass).",
-)  # fmt: skip
+@body_layer_output_option
+@resample_fps_option
 @click.option(
     "--units", type=click.Choice(["auto", *UNITS]), default="auto", show_default=True,
     help="Length unit of the file; auto tells m, cm and mm apart by the skeleton's height.",

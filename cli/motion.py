@@ -9,7 +9,7 @@ import numpy as np
 
 from usd_garment.body import NUM_BETAS, load_body_model
 from usd_garment.cli.errors import user_errors
-from usd_garment.cli.options import body_model_option
+from usd_garment.cli.options import body_layer_output_option, body_model_option
 from usd_garment.motion.procedural import (
     ARM_CLEARANCE,
     MOTION_KINDS,
@@ -52,13 +52,7 @@ def _betas(text: str | None, seed: int) -> np.ndarray | None:
 
 @motion.command("make")
 @click.argument("kind", type=click.Choice(list(MOTION_KINDS)), metavar="KIND")
-@click.option(
-    "-o",
-    "--output",
-    type=click.Path(dir_okay=False, path_type=Path),
-    required=True,
-    help="USD body layer to write (.usda, .usdc or .usd).",
-)
+@body_layer_output_option
 @click.option("--frames", type=click.IntRange(min=1), default=120, show_default=True)
 @click.option("--fps", type=click.FloatRange(min=0, min_open=True), default=30.0, show_default=True)
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the motion.")

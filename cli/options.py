@@ -36,6 +36,17 @@ lod_option = click.option(
     "--lod", type=click.Choice(tuple(LODS)), default="high", show_default=True,
     help="Garment level of detail.",
 )  # fmt: skip
+body_layer_output_option = click.option(
+    "-o",
+    "--output",
+    type=click.Path(dir_okay=False, path_type=Path),
+    required=True,
+    help="USD body layer to write (.usda, .usdc or .usd).",
+)
+resample_fps_option = click.option(
+    "--fps", type=click.FloatRange(min=0, min_open=True), default=None,
+    help="Resample to this frame rate (default: the file's own).",
+)  # fmt: skip
 frames_option = click.option(
     "--frames", default=None, help="Frames A:B of the stage's range (B exclusive)."
 )
