@@ -63,6 +63,12 @@ from usd_garment.training.dataset import SPLITS, dataset_layers
     help="Frames optimised together, each warm-started from the last solved frame.",
 )
 @workers_option
+@click.option(
+    "--update",
+    is_flag=True,
+    help="If OUTPUT exists, keep its sequences and project only the layers it lacks (a dataset "
+    "that grew, a simulation run that finished later).",
+)
 @body_model_option
 @click.option(
     "--fields",
@@ -81,6 +87,7 @@ def project(
     iterations: int,
     chunk: int,
     workers: int,
+    update: bool,
     body_model: Path | None,
     fields: Path | None,
 ) -> None:
@@ -101,7 +108,7 @@ def project(
         data = project_layers(
             sim_layers, body_layers, output, garment=garment, lod=lod,
             body_model=body_model, fields=fields, settings=settings, splits=splits,
-            workers=workers, on_read=bar.on_read, progress=bar.progress,
+            workers=workers, update=update, on_read=bar.on_read, progress=bar.progress,
         )  # fmt: skip
     seconds = float(data.metadata["seconds"])
     wall = float(data.metadata["wall_seconds"])

@@ -230,3 +230,30 @@ def test_project_command_rejects_another_garment_mesh(tmp_path, body, template, 
     assert result.exit_code == 1
     assert "is not the tshirt 'high' template" in result.output
     assert "Traceback" not in result.output and not out.exists()
+
+
+def test_project_update_appends_only_new_layers(tmp_path, body, template, motion):
+    rest = np.repeat(template.vertices[None], FRAMES, axis=0) * np.float32(1.01)
+    body_path, first = _write_inputs(tmp_path, body, template, motion, rest)
+    second = tmp_path / "second.usdc"
+    second.write_bytes(first.read_bytes())
+    out = tmp_path / "canonical.npz"
+    common = ["--body", str(body_path), "-o", str(out), "--lod", "low", "--iterations", "3"]
+    result = CliRunner().invoke(main, ["project", str(first), *common])
+    assert result.exit_code == 0, result.output
+    before = load_canonical_set(out)
+    result = CliRunner().invoke(main, ["project", str(first), str(second), "--update", *common])
+    assert result.exit_code == 0, result.output
+    after = load_canonical_set(out)
+    assert after.sources == [str(first), str(second)] and after.splits == ["train", "train"]
+    np.testing.assert_array_equal(after.canonical[after.sequence(0)], before.canonical)
+    np.testing.assert_allclose(after.canonical[after.sequence(1)], before.canonical, atol=1e-5)
+    assert list(after.frame_offsets) == [0, FRAMES, 2 * FRAMES]
+    # Nothing new: the file is left as it is; other settings: refused, file untouched.
+    written = out.read_bytes()
+    result = CliRunner().invoke(main, ["project", str(second), "--update", *common])
+    assert result.exit_code == 0 and out.read_bytes() == written, result.output
+    other = [*common[:-1], "4"]
+    result = CliRunner().invoke(main, ["project", str(first), "--update", *other])
+    assert result.exit_code != 0 and "projection settings" in result.output, result.output
+    assert "Traceback" not in result.output and out.read_bytes() == written

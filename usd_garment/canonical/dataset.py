@@ -57,6 +57,36 @@ class CanonicalSet:
         return [s for s, name in enumerate(self.splits) if name == split]
 
 
+def concat_canonical_sets(first: CanonicalSet, second: CanonicalSet) -> CanonicalSet:
+    """The sequences of ``first`` then those of ``second``, with ``second``'s metadata.
+
+    Raises:
+        ValueError: the two sets are of different garment meshes.
+    """
+    if not (
+        np.array_equal(first.faces, second.faces)
+        and np.allclose(first.template, second.template, atol=1e-6)
+    ):
+        raise ValueError("the two canonical sets are of different garment templates")
+    per_frame = {
+        name: np.concatenate([getattr(first, name), getattr(second, name)])
+        for name in ("canonical", "pose", "trans", "error", "max_error")
+    }
+    return CanonicalSet(
+        **per_frame,
+        frame_offsets=np.concatenate(
+            [first.frame_offsets, first.frame_offsets[-1] + second.frame_offsets[1:]]
+        ),
+        betas=np.concatenate([first.betas, second.betas]),
+        fps=np.concatenate([first.fps, second.fps]),
+        template=second.template,
+        faces=second.faces,
+        sources=[*first.sources, *second.sources],
+        splits=[*first.splits, *second.splits],
+        metadata=second.metadata,
+    )
+
+
 def save_canonical_set(path: str | Path, data: CanonicalSet) -> None:
     """Write ``data`` to ``path`` atomically (``.npz``)."""
     arrays = {name: getattr(data, name) for name in _ARRAYS}

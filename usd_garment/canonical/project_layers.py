@@ -15,7 +15,12 @@ import torch
 
 from usd_garment import __version__
 from usd_garment.body.io import load_body_model
-from usd_garment.canonical.dataset import CanonicalSet, save_canonical_set
+from usd_garment.canonical.dataset import (
+    CanonicalSet,
+    concat_canonical_sets,
+    load_canonical_set,
+    save_canonical_set,
+)
 from usd_garment.canonical.projection import Projection, ProjectionSettings, project_sequence
 from usd_garment.fields.body_fields import load_body_fields
 from usd_garment.garment.library import load_template
@@ -109,6 +114,7 @@ def project_layers(
     settings: ProjectionSettings | None = None,
     splits: Sequence[str] | None = None,
     workers: int = 1,
+    update: bool = False,
     on_read: Callable[[int], None] | None = None,
     progress: Callable[[int], None] | None = None,
 ) -> CanonicalSet:
@@ -126,6 +132,9 @@ def project_layers(
             default.
         workers: processes projecting one sequence each at a time (spawned, one torch thread
             each); 1 projects in this process.
+        update: when ``output`` exists, keep its sequences, project only the layers that are not
+            among its sources and append them (same garment, lod, body and settings required);
+            nothing is written when every layer is already there.
         on_read: called once with the total number of frames after all inputs are read.
         progress: called with the number of frames projected so far (after each chunk of
             frames with one worker, after each sequence with several).
@@ -152,6 +161,16 @@ def project_layers(
         )
     if workers < 1:
         raise ValueError("workers must be >= 1")
+    kept = None
+    if update and output.is_file():
+        kept = load_canonical_set(output)
+        _check_same_projection(kept, output, garment, lod, settings)
+        new = [k for k, sim in enumerate(sim_layers) if str(Path(sim)) not in kept.sources]
+        if not new:
+            return kept
+        sim_layers = [sim_layers[k] for k in new]
+        body_layers = body_layers if len(body_layers) == 1 else [body_layers[k] for k in new]
+        splits = [splits[k] for k in new]
     body = load_body_model(body_model)
     body_fields = load_body_fields(fields)
     if body_fields.body_name != body.name:
@@ -222,5 +241,27 @@ def project_layers(
             "usd_garment_version": __version__,
         },
     )
+    if kept is not None:
+        if kept.metadata.get("body_model") != body.name:
+            raise ValueError(f"{output}: made for body '{kept.metadata.get('body_model')}'")
+        for key in ("seconds", "wall_seconds"):
+            data.metadata[key] += float(kept.metadata.get(key, 0.0))
+        data = concat_canonical_sets(kept, data)
     save_canonical_set(output, data)
     return data
+
+
+def _check_same_projection(
+    kept: CanonicalSet, output: Path, garment: str, lod: str, settings: ProjectionSettings
+) -> None:
+    """Refuse to append to a set made for another garment or with other projection settings.
+
+    Raises:
+        ValueError: ``kept`` (read from ``output``) differs in garment, lod or settings.
+    """
+    made = (kept.metadata.get("garment"), kept.metadata.get("lod"), kept.metadata.get("projection"))
+    if made != (garment, lod, settings.to_json()):
+        raise ValueError(
+            f"{output}: made for {made[0]} '{made[1]}' with projection settings {made[2]}, not "
+            f"{garment} '{lod}' with {settings.to_json()}; write a new file instead"
+        )
