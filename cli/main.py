@@ -6,6 +6,7 @@ import click
 
 from usd_garment import __version__
 from usd_garment.cli.amass import export_amass, import_amass
+from usd_garment.cli.bench import bench
 from usd_garment.cli.body import body
 from usd_garment.cli.bvh import import_bvh
 from usd_garment.cli.dataset import dataset
@@ -40,3 +41,4 @@ main.add_command(motion)
 main.add_command(fields)
 main.add_command(project)
 main.add_command(train)
+main.add_command(bench)

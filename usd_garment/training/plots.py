@@ -8,18 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from usd_garment.atomic import atomic_output
-
-
-def _pyplot() -> Any:
-    try:
-        import matplotlib
-    except ImportError as exc:  # pragma: no cover - depends on the installation
-        raise ImportError("plots need matplotlib: pip install 'usd-garment[train]'") from exc
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
+from usd_garment.eval.plotting import pyplot
 
 #: Curves drawn per stage: (history key, label).
 CURVES: dict[str, tuple[tuple[str, str], ...]] = {
@@ -41,7 +30,7 @@ CURVES: dict[str, tuple[tuple[str, str], ...]] = {
 def plot_curves(records: dict[str, dict[str, Any]], path: str | Path) -> None:
     """One panel per trained stage of ``records`` (stage → record of ``train_stage``), its
     curves over epochs on a log scale, written to the PNG ``path``."""
-    plt = _pyplot()
+    plt = pyplot()
     stages = [s for s in CURVES if s in records]
     fig, axes = plt.subplots(1, max(len(stages), 1), figsize=(5 * max(len(stages), 1), 3.8))
     axes = [axes] if len(stages) <= 1 else list(axes)
@@ -66,7 +55,7 @@ def plot_collisions(runs: dict[str, list[dict[str, Any]]], path: str | Path) -> 
     """The paper's Fig. 4: share of vertices inside the canonical body per epoch, for
     reconstructions of held-out garments and for decodings of random latents, one line pair per
     run (label → the VAE's history rows), written to the PNG ``path``."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), sharey=False)
     for label, rows in runs.items():
         epochs = [r["epoch"] for r in rows]

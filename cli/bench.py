@@ -1,0 +1,183 @@
+"""``usd-garment bench``: every garment method at every level of detail on the same inputs in one
+run; a JSON and CSV table, the speed–accuracy chart and the per-frame collision curves."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import click
+from tqdm import tqdm
+
+from usd_garment.cli.errors import user_errors
+from usd_garment.eval.bench import BenchInput, BenchMethod, chart_points, run_bench, write_report
+from usd_garment.eval.bench_plots import plot_chart, plot_collision_curves
+from usd_garment.garment.template import GARMENT_NAMES, LODS
+from usd_garment.methods import available_methods
+from usd_garment.methods.learned import LearnedMethod, shipped_model
+from usd_garment.methods.learned_model import load_learned_model
+from usd_garment.methods.simulation import SimulationMethod
+from usd_garment.training.dataset import dataset_layers
+
+#: Methods benched when none is named (the learned one only where a model ships).
+DEFAULT_METHODS = ("learned", "lbs", "lbs+postprocess")
+
+
+def _labelled_models(values: tuple[str, ...]) -> list[tuple[str, Path]]:
+    models = []
+    for value in values:
+        label, sep, path = value.partition("=")
+        if not sep or not label or not path:
+            raise click.BadParameter(f"expected LABEL=DIR, got '{value}'", param_hint="--model")
+        models.append((label, Path(path)))
+    return models
+
+
+def _methods(
+    names: tuple[str, ...],
+    models: list[tuple[str, Path]],
+    lods: tuple[str, ...],
+    garment: str,
+    simulation_frames: int,
+) -> list[BenchMethod]:
+    """The benched methods: learned ones at the level of detail they were trained on, the
+    others at every one of ``lods``, the simulation on the first ``simulation_frames``."""
+    out = []
+    for name in names or DEFAULT_METHODS:
+        if name == LearnedMethod.name:
+            path = shipped_model(garment)
+            if path is not None or names:
+                models = [(name, path), *models]
+        elif name == SimulationMethod.name:
+            continue
+        else:
+            out.append(BenchMethod(name, name, lods=lods))
+    learned = []
+    for label, path in models:
+        if path is None:
+            raise click.UsageError(f"no trained model ships for the garment '{garment}'")
+        lod = load_learned_model(path).lod
+        learned.append(BenchMethod(label, LearnedMethod.name, path, lods=(lod,)))
+    out = learned + out
+    if simulation_frames > 0 or SimulationMethod.name in names:
+        frames = simulation_frames if simulation_frames > 0 else 30
+        out.append(BenchMethod(SimulationMethod.name, SimulationMethod.name, lods=lods,
+                               frames=frames))  # fmt: skip
+    return out
+
+
+@click.command("bench")
+@click.argument("inputs", metavar="[INPUT]...", nargs=-1, type=click.Path(path_type=Path))
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(file_okay=False, path_type=Path),
+    required=True,
+    help="Report folder: report.json, report.csv, chart.png, collisions.png, layers/.",
+)
+@click.option(
+    "--reference",
+    "references",
+    multiple=True,
+    type=click.Path(path_type=Path),
+    help="Simulated garment layer of each INPUT, in the same order (repeat): the error is "
+    "measured against it.",
+)
+@click.option(
+    "--manifest",
+    type=click.Path(path_type=Path),
+    default=None,
+    help="Also bench the sequences of a 'dataset make' folder (see --split), each against its "
+    "simulation.",
+)
+@click.option("--split", "split_names", default="test", show_default=True,
+              help="With --manifest: comma-separated splits.")  # fmt: skip
+@click.option(
+    "--method",
+    "names",
+    multiple=True,
+    type=click.Choice(available_methods()),
+    help="Methods to bench (repeat); default: learned (where a model ships), lbs, lbs+postprocess.",
+)
+@click.option(
+    "--model",
+    "models",
+    multiple=True,
+    metavar="LABEL=DIR",
+    help="Also bench a learned model directory under LABEL (repeat), e.g. an ablation.",
+)
+@click.option(
+    "--lod",
+    "lods",
+    multiple=True,
+    type=click.Choice(LODS),
+    help="Levels of detail of the non-learned methods (repeat); default: all.",
+)
+@click.option(
+    "--simulation-frames",
+    type=click.IntRange(0),
+    default=0,
+    show_default=True,
+    help="Also run the physics simulation on the first N frames of each input (slow).",
+)
+@click.option("--garment", type=click.Choice(GARMENT_NAMES), default="tshirt", show_default=True)
+def bench(
+    inputs: tuple[Path, ...],
+    output: Path,
+    references: tuple[Path, ...],
+    manifest: Path | None,
+    split_names: str,
+    names: tuple[str, ...],
+    models: tuple[str, ...],
+    lods: tuple[str, ...],
+    simulation_frames: int,
+    garment: str,
+) -> None:
+    """Dress every INPUT (animated body layers) with every method at every level of detail;
+    chart speed against accuracy."""
+    started = time.perf_counter()
+    with user_errors():
+        if references and len(references) != len(inputs):
+            raise click.UsageError(
+                f"give one --reference per INPUT ({len(references)} for {len(inputs)})"
+            )
+        cases = [
+            BenchInput(path.stem, path, references[k] if references else None)
+            for k, path in enumerate(inputs)
+        ]
+        if manifest is not None:
+            layers = dataset_layers(manifest, [s.strip() for s in split_names.split(",")])
+            cases += [
+                BenchInput(name, body, sim)
+                for name, body, sim in zip(
+                    layers.names, layers.bodies, layers.garments, strict=True
+                )
+            ]
+        if not cases:
+            raise click.UsageError("give INPUT... or --manifest")
+        for case in cases:
+            for path in (case.body, case.reference):
+                if path is not None and not path.is_file():
+                    raise click.BadParameter(f"{path}: no such file")
+        methods = _methods(names, _labelled_models(models), lods or LODS, garment,
+                           simulation_frames)  # fmt: skip
+    runs = sum(len(m.lods) for m in methods) * len(cases)
+    output.mkdir(parents=True, exist_ok=True)
+    with tqdm(total=runs, desc="bench", unit="run", leave=False, disable=None) as bar:
+        rows = run_bench(cases, methods, output, garment=garment, on_row=lambda _: bar.update())
+    wall = time.perf_counter() - started
+    write_report(rows, output, {"wall_seconds": wall, "inputs": [c.name for c in cases]})
+    plot_chart(rows, output / "chart.png", f"{garment}: {len(cases)} input(s), {wall:.0f} s")
+    plot_collision_curves(rows, output / "collisions.png")
+    click.echo(f"{'method':<28} {'lod':<7} {'frames/s':>9} {'inside forced %':>16} "
+               f"{'elsewhere %':>12} {'error mm':>9} failures")  # fmt: skip
+    for p in chart_points(rows):
+        click.echo(
+            f"{p.label:<28} {p.lod:<7} {p.frames_per_second:>9.1f} "
+            f"{100 * p.inside_forced_share:>16.4f} {100 * p.inside_elsewhere_share:>12.4f} "
+            f"{p.reference_mm:>9.2f} {p.failures}"
+        )
+    for r in rows:
+        if r.error:
+            click.echo(f"failed: {r.label} ({r.lod}) on {r.input}: {r.error}")
+    click.echo(f"{len(rows)} runs in {wall:.1f} s; wrote {output}")

@@ -1,0 +1,91 @@
+"""``usd-garment bench``: every method × level of detail on the same inputs, a row per run with
+speed and the collision and error figures, the Pareto front, the pictures, and failures reported
+as rows instead of ending the run."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from usd_garment.body.model import BodyModel
+from usd_garment.cli.main import main
+from usd_garment.eval.bench import BenchInput, BenchMethod, pareto_front, run_bench
+from usd_garment.motion.procedural import make_motion
+from usd_garment.usd.body_layer import write_body_layer
+
+pytest.importorskip("matplotlib")
+
+
+@pytest.fixture(scope="module")
+def walk(tmp_path_factory: pytest.TempPathFactory, body_model: BodyModel) -> Path:
+    path = tmp_path_factory.mktemp("bench") / "walk.usdc"
+    write_body_layer(path, make_motion("walk", 6, seed=1, body=body_model), body_model)
+    return path
+
+
+def test_pareto_front_keeps_the_points_nothing_beats() -> None:
+    speed = [10.0, 100.0, 1000.0, 50.0, 1000.0, float("nan")]
+    cost = [0.1, 0.5, 2.0, 0.6, 3.0, 0.0]
+    # 3 is beaten by 1 (faster and cheaper), 4 by 2 (as fast, cheaper), 5 has no speed.
+    assert pareto_front(speed, cost) == [0, 1, 2]
+
+
+def test_bench_command_writes_table_chart_and_curves(tmp_path: Path, walk: Path) -> None:
+    reference = tmp_path / "reference.usdc"
+    result = CliRunner().invoke(
+        main, ["dress", str(walk), "-o", str(reference), "--method", "lbs", "--lod", "low"]
+    )
+    assert result.exit_code == 0, result.output
+    report = tmp_path / "report"
+    args = ["bench", str(walk), "--reference", str(reference), "--method", "lbs", "--method",
+            "lbs+postprocess", "--lod", "low", "--lod", "medium", "-o", str(report)]  # fmt: skip
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 0, result.output
+    assert "4 runs in" in result.output
+    for name in ("report.json", "report.csv", "chart.png", "collisions.png"):
+        assert (report / name).stat().st_size > 0, name
+    with open(report / "report.csv") as handle:
+        rows = {(r["method"], r["lod"]): r for r in csv.DictReader(handle)}
+    assert set(rows) == {(m, lod) for m in ("lbs", "lbs+postprocess") for lod in ("low", "medium")}
+    assert all(int(r["frames"]) == 6 and float(r["frames_per_second"]) > 0 for r in rows.values())
+    # Error against the reference where the mesh is the reference's (low), none elsewhere.
+    assert float(rows["lbs", "low"]["reference_mm"]) == pytest.approx(0.0, abs=1e-4)
+    assert float(rows["lbs+postprocess", "low"]["reference_mm"]) >= 0.0
+    assert rows["lbs", "medium"]["reference_mm"] == ""
+    # The push-out leaves no vertex inside elsewhere, lbs may; both are measured per frame.
+    assert float(rows["lbs+postprocess", "low"]["inside_elsewhere_share"]) <= float(
+        rows["lbs", "low"]["inside_elsewhere_share"]
+    )
+    payload = json.loads((report / "report.json").read_text())
+    assert len(payload["chart"]) == 4 and payload["wall_seconds"] > 0
+    assert all(len(r["inside_elsewhere"]) == 6 for r in payload["rows"])
+
+
+def test_a_failing_method_is_a_row_not_the_end(tmp_path: Path, walk: Path) -> None:
+    methods = [
+        BenchMethod("broken", "learned", tmp_path / "no_model", lods=("low",)),
+        BenchMethod("lbs", "lbs", lods=("low",)),
+    ]
+    rows = run_bench([BenchInput("walk", walk)], methods, tmp_path / "out")
+    assert [r.label for r in rows] == ["broken", "lbs"]
+    assert rows[0].error.startswith("ModelError") and rows[0].frames == 0
+    assert not rows[1].error and np.isfinite(rows[1].frames_per_second)
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--model", "nolabel"], "expected LABEL=DIR"),
+        (["--reference", "a.usdc", "--reference", "b.usdc"], "one --reference per INPUT"),
+        (["--method", "learned", "--garment", "dress"], "no trained model ships"),
+    ],
+)
+def test_bench_bad_input(tmp_path: Path, walk: Path, extra: list[str], message: str) -> None:
+    result = CliRunner().invoke(main, ["bench", str(walk), "-o", str(tmp_path / "r"), *extra])
+    assert result.exit_code != 0 and message in result.output, result.output
+    assert "Traceback" not in result.output and not (tmp_path / "r").exists()

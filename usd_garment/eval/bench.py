@@ -1,0 +1,282 @@
+"""Speed against accuracy: every garment method at every level of detail dressed on the same
+inputs in one run, each result evaluated against the posed body (collisions by winding number)
+and, where a simulated reference exists, against the simulation (mean vertex error)."""
+
+from __future__ import annotations
+
+import csv
+import json
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from usd_garment.atomic import atomic_output
+from usd_garment.body.io import load_body_model
+from usd_garment.dress import dress
+from usd_garment.eval.evaluate import evaluate_layer
+from usd_garment.methods import GarmentMethod, get_method
+from usd_garment.methods.learned import LearnedMethod
+from usd_garment.usd.garment_read import read_garment_layer
+from usd_garment.usd.read import read_smpl_motion
+
+
+@dataclass(frozen=True)
+class BenchInput:
+    """One animated body to dress.
+
+    Attributes:
+        name: the label in the report.
+        body: the animated SMPL body layer.
+        reference: a simulated garment layer of that body (any level of detail) to measure the
+            error against; None when there is none.
+    """
+
+    name: str
+    body: Path
+    reference: Path | None = None
+
+
+@dataclass(frozen=True)
+class BenchMethod:
+    """One method of the chart.
+
+    Attributes:
+        label: its name in the report (e.g. "learned", "learned no-self-supervision").
+        method: the registry name of the garment method.
+        model: the model directory of a learned method (None: the shipped default).
+        lods: the levels of detail to run it at.
+        frames: dress only the first ``frames`` frames of each input (None: all); for methods
+            too slow to run whole inputs (the simulation).
+    """
+
+    label: str
+    method: str
+    model: Path | None = None
+    lods: tuple[str, ...] = ("high",)
+    frames: int | None = None
+
+    def instance(self) -> GarmentMethod:
+        """A new instance of the method."""
+        if self.method == LearnedMethod.name:
+            return LearnedMethod(self.model)
+        return get_method(self.method)
+
+
+@dataclass
+class BenchRow:
+    """One method × level of detail × input.
+
+    Attributes:
+        input, label, method, lod: what was run.
+        frames, vertices: the size of the output.
+        seconds: wall time (s) of read, compute and write inside the stage processor.
+        frames_per_second: frames over the total of ``seconds``.
+        summary: the sequence figures of :class:`GarmentMetrics` (``reference_mm`` None
+            without a reference of the same mesh).
+        inside_elsewhere: ``(T,)`` per-frame share inside the body elsewhere.
+        inside_forced: ``(T,)`` per-frame share inside where the body is pressed into itself.
+        error: the failure's one-line message when the method failed on this input, else "".
+    """
+
+    input: str
+    label: str
+    method: str
+    lod: str
+    frames: int = 0
+    vertices: int = 0
+    seconds: dict[str, float] = field(default_factory=dict)
+    frames_per_second: float = float("nan")
+    summary: dict[str, Any] = field(default_factory=dict)
+    inside_elsewhere: list[float] = field(default_factory=list)
+    inside_forced: list[float] = field(default_factory=list)
+    error: str = ""
+
+
+#: Columns of the CSV table (summary figures after the run's own columns).
+CSV_SUMMARY = (
+    "inside_forced_share",
+    "inside_elsewhere_share",
+    "within_1mm_share",
+    "max_elsewhere_mm",
+    "reference_mm",
+    "acceleration",
+    "nan_count",
+)
+
+
+def _reference_vertices(reference: Path) -> int:
+    points, _, _ = read_garment_layer(reference)
+    return int(points.shape[1])
+
+
+def run_bench(
+    inputs: Sequence[BenchInput],
+    methods: Sequence[BenchMethod],
+    folder: str | Path,
+    *,
+    garment: str = "tshirt",
+    on_row: Callable[[BenchRow], None] | None = None,
+) -> list[BenchRow]:
+    """Dress every input with every method at each of its levels of detail and evaluate it.
+
+    Layers go to ``folder/layers``. A method that raises on an input gets a row with ``error``
+    set and the run goes on (the stress suite wants to see failures, not stop at them).
+
+    Raises:
+        FileNotFoundError: ``folder`` cannot be created.
+    """
+    layers = Path(folder) / "layers"
+    layers.mkdir(parents=True, exist_ok=True)
+    reference_sizes = {
+        case.reference: _reference_vertices(case.reference)
+        for case in inputs
+        if case.reference is not None
+    }
+    body = load_body_model()
+    rows = []
+    for case in inputs:
+        length = read_smpl_motion(case.body, body)[0].num_frames
+        for entry in methods:
+            for lod in entry.lods:
+                row = BenchRow(case.name, entry.label, entry.method, lod)
+                out = layers / f"{case.name}__{entry.label.replace(' ', '_')}__{lod}.usdc"
+                frames = None if entry.frames is None else (0, min(entry.frames, length))
+                try:
+                    result = dress(
+                        case.body, out, garment=garment, method=entry.instance(), lod=lod,
+                        frames=frames,
+                    )  # fmt: skip
+                    same_mesh = reference_sizes.get(case.reference) == result.vertices
+                    metrics, _ = evaluate_layer(
+                        out, case.body, case.reference if same_mesh else None, garment
+                    )
+                except Exception as exc:  # a failing method is a result here, not the end
+                    row.error = f"{type(exc).__name__}: {(str(exc) or '-').splitlines()[0]}"
+                else:
+                    row.frames, row.vertices = result.frames, result.vertices
+                    row.seconds = result.seconds
+                    row.frames_per_second = result.frames / max(sum(result.seconds.values()), 1e-9)
+                    row.summary = metrics.summary()
+                    row.inside_elsewhere = [float(v) for v in metrics.inside_elsewhere_share]
+                    row.inside_forced = [float(v) for v in metrics.inside_forced_share]
+                rows.append(row)
+                if on_row is not None:
+                    on_row(row)
+    return rows
+
+
+@dataclass
+class ChartPoint:
+    """One method × level of detail over all inputs: frames/s over all frames, collision and
+    error figures as frame-weighted means over the inputs it ran on."""
+
+    label: str
+    lod: str
+    frames: int
+    frames_per_second: float
+    inside_elsewhere_share: float
+    inside_forced_share: float
+    reference_mm: float
+    failures: int
+
+
+def chart_points(rows: Sequence[BenchRow]) -> list[ChartPoint]:
+    """The rows gathered per method × level of detail, in the order they first appear."""
+    keys = list(dict.fromkeys((r.label, r.lod) for r in rows))
+    points = []
+    for label, lod in keys:
+        ok = [r for r in rows if (r.label, r.lod) == (label, lod) and not r.error]
+        frames = sum(r.frames for r in ok)
+        seconds = sum(sum(r.seconds.values()) for r in ok)
+
+        def mean(key: str, group: list[BenchRow] = ok) -> float:
+            pairs = [(r.summary.get(key), r.frames) for r in group]
+            pairs = [(v, n) for v, n in pairs if v is not None and np.isfinite(v)]
+            if not pairs:
+                return float("nan")
+            return float(sum(v * n for v, n in pairs) / sum(n for _, n in pairs))
+
+        points.append(
+            ChartPoint(
+                label=label,
+                lod=lod,
+                frames=frames,
+                frames_per_second=frames / seconds if seconds > 0 else float("nan"),
+                inside_elsewhere_share=mean("inside_elsewhere_share"),
+                inside_forced_share=mean("inside_forced_share"),
+                reference_mm=mean("reference_mm"),
+                failures=sum(1 for r in rows if (r.label, r.lod) == (label, lod) and r.error),
+            )
+        )
+    return points
+
+
+def pareto_front(speed: Sequence[float], cost: Sequence[float]) -> list[int]:
+    """Indices of the points no other point beats: none is at least as fast and at most as
+    costly with one of the two strictly better (NaN points are never on the front); sorted by
+    speed."""
+    ok = [i for i in range(len(speed)) if np.isfinite(speed[i]) and np.isfinite(cost[i])]
+    front = [
+        i
+        for i in ok
+        if not any(
+            speed[j] >= speed[i]
+            and cost[j] <= cost[i]
+            and (speed[j], cost[j]) != (speed[i], cost[i])
+            for j in ok
+        )
+    ]
+    return sorted(front, key=lambda i: speed[i])
+
+
+def write_report(
+    rows: Sequence[BenchRow], folder: str | Path, extra: dict[str, Any] | None = None
+) -> tuple[Path, Path]:
+    """Write ``report.json`` (rows with per-frame curves, chart points, ``extra``) and
+    ``report.csv`` (one line per row) to ``folder``; returns both paths."""
+    folder = Path(folder)
+    points = chart_points(rows)
+    payload = {
+        "rows": [asdict(r) for r in rows],
+        "chart": [asdict(p) for p in points],
+        "written": time.strftime("%Y-%m-%d %H:%M:%S"),
+        **(extra or {}),
+    }
+    json_path, csv_path = folder / "report.json", folder / "report.csv"
+    with atomic_output(json_path) as tmp:
+        tmp.write_text(json.dumps(_finite(payload), indent=1))
+    with atomic_output(csv_path) as tmp, open(tmp, "w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(
+            ["input", "method", "lod", "frames", "vertices", "frames_per_second", "read_s",
+             "compute_s", "write_s", *CSV_SUMMARY, "error"]
+        )  # fmt: skip
+        for r in rows:
+            s = r.seconds
+            writer.writerow(
+                [r.input, r.label, r.lod, r.frames, r.vertices, _cell(r.frames_per_second),
+                 *(_cell(s.get(k)) for k in ("read", "compute", "write")),
+                 *(_cell(r.summary.get(k)) for k in CSV_SUMMARY), r.error]
+            )  # fmt: skip
+    return json_path, csv_path
+
+
+def _cell(value: Any) -> str:
+    if value is None or (isinstance(value, float) and not np.isfinite(value)):
+        return ""
+    return f"{value:.6g}" if isinstance(value, float) else str(value)
+
+
+def _finite(value: Any) -> Any:
+    """``value`` with NaN and infinite floats replaced by None (valid JSON)."""
+    if isinstance(value, float):
+        return value if np.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v) for v in value]
+    return value
