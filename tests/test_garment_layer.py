@@ -137,6 +137,21 @@ def test_value_clips_read_back_as_the_plain_layer(
     np.testing.assert_array_equal(ia.time_codes, ib.time_codes)
 
 
+def test_dress_in_small_chunks_writes_the_same_garment(
+    amass_layer: Path, tmp_path: Path, body_model: BodyModel
+) -> None:
+    template = torso_template(body_model)
+    whole, chunked = tmp_path / "whole.usdc", tmp_path / "chunked.usdc"
+    done: list[int] = []
+    dress(amass_layer, whole, template=template, method="lbs")
+    result = dress(amass_layer, chunked, template=template, method="lbs", frames_per_chunk=5,
+                   clip_threshold=10, progress=done.append)  # fmt: skip
+    assert done == [5, 10, 12] and result.outputs == [chunked, tmp_path / "chunked.clips"]
+    # Same frames; only float rounding of the batched posing differs.
+    a, b = read_garment_layer(whole)[0], read_garment_layer(chunked)[0]
+    np.testing.assert_allclose(a, b, atol=1e-6)
+
+
 def test_several_clips_and_relative_paths(tmp_path: Path, body_model: BodyModel) -> None:
     motion = random_motion(frames=7)
     source = tmp_path / "in" / "body.usda"
@@ -158,6 +173,46 @@ def test_several_clips_and_relative_paths(tmp_path: Path, body_model: BodyModel)
     assert "./out/g.usdc" in text and "./in/body.usda" in text
     points, _, _ = read_garment_layer(out)
     np.testing.assert_allclose(points, frames.points, atol=1e-6)
+
+
+@pytest.mark.parametrize("clip_threshold", [1, garment_layer.CLIP_THRESHOLD])
+def test_streamed_chunks_write_the_same_layer(
+    tmp_path: Path, body_model: BodyModel, clip_threshold: int
+) -> None:
+    motion = random_motion(frames=11)
+    source = tmp_path / "body.usda"
+    write_body_layer(source, motion, body_model, with_mesh=False)
+    _, info = read_smpl_motion(source, body_model)
+    points = np.random.default_rng(1).normal(size=(11, 3, 3))
+    frames = garment_layer.GarmentFrames(
+        "tshirt", "tshirt", np.array([[0, 1, 2]]), np.zeros((3, 2)), points, "lbs", "m", "1",
+        body_model.name,
+    )  # fmt: skip
+    settings = {"clip_threshold": clip_threshold, "clip_frames": 4}
+    whole, streamed = tmp_path / "whole.usdc", tmp_path / "streamed.usdc"
+    garment_layer.write_garment_layer(whole, info, [frames], motion.time_codes, **settings)
+    with garment_layer.GarmentLayerWriter(
+        streamed, info, [frames], motion.time_codes, **settings
+    ) as writer:
+        for s, e in ((0, 1), (1, 6), (6, 7), (7, 11)):  # uneven, across clip boundaries
+            writer.add([points[s:e]])
+            assert not streamed.exists()
+    a, _, ia = read_garment_layer(whole)
+    b, _, ib = read_garment_layer(streamed)
+    np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(ia.time_codes, ib.time_codes)
+    if clip_threshold == 1:
+        names = sorted(p.name for p in (tmp_path / "streamed.clips").iterdir())
+        assert names == sorted(p.name for p in (tmp_path / "whole.clips").iterdir())
+        assert len([n for n in names if n.startswith("clip_")]) == 3
+    # Fewer frames than time codes: an error, and nothing written.
+    before = set(tmp_path.iterdir())
+    short = garment_layer.GarmentLayerWriter(
+        tmp_path / "short.usdc", info, [frames], motion.time_codes, **settings
+    )
+    with pytest.raises(ValueError, match="10 frames written for 11 time codes"), short as writer:
+        writer.add([points[:10]])
+    assert set(tmp_path.iterdir()) == before
 
 
 def test_failed_write_leaves_no_files(

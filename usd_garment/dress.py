@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Callable
+from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -15,13 +16,17 @@ from usd_garment.body.io import load_body_model
 from usd_garment.garment.library import load_template
 from usd_garment.garment.template import GARMENT_NAMES, LODS, GarmentTemplate
 from usd_garment.methods import GarmentMethod, get_method
+from usd_garment.methods.base import predict_chunks
 from usd_garment.usd.garment_layer import (
     CLIP_THRESHOLD,
     GarmentFrames,
+    GarmentLayerWriter,
     check_outputs,
-    write_garment_layer,
 )
 from usd_garment.usd.read import read_smpl_motion
+
+#: Frames computed and written at once by :func:`dress`.
+FRAMES_PER_CHUNK = 256
 
 
 @dataclass
@@ -71,6 +76,7 @@ def dress(
     root_layer: str | Path | None = None,
     template: GarmentTemplate | None = None,
     clip_threshold: int = CLIP_THRESHOLD,
+    frames_per_chunk: int = FRAMES_PER_CHUNK,
     on_read: Callable[[int], None] | None = None,
     progress: Callable[[int], None] | None = None,
 ) -> DressResult:
@@ -89,6 +95,9 @@ def dress(
         root_layer: also write a layer that sublayers the garment layer and the input.
         template: a ready template (tests, benchmarks); skips loading one.
         clip_threshold: frames × vertices above which the layer uses value clips.
+        frames_per_chunk: frames computed and written at once; with value clips, memory stays
+            bounded by a chunk and a clip whatever the length (methods that pose the whole
+            sequence at once, the simulation, hold all of it).
         on_read: called once with the frame count after reading.
         progress: called with the number of frames computed so far.
 
@@ -114,37 +123,54 @@ def dress(
     if on_read is not None:
         on_read(motion.num_frames)
 
-    start = time.perf_counter()
-    points = garment_method.predict(motion, body, template, progress)
-    seconds["compute"] = time.perf_counter() - start
+    chunks = predict_chunks(garment_method, motion, body, template, frames_per_chunk, progress)
+    seconds["compute"] = seconds["write"] = 0.0
+    done = 0
+    writer: GarmentLayerWriter | None = None
+    with ExitStack() as stack:
+        while True:
+            start = time.perf_counter()
+            points = next(chunks, None)
+            seconds["compute"] += time.perf_counter() - start
+            if points is None:
+                break
+            start = time.perf_counter()
+            if writer is None:  # after the first chunk: a learned method knows its version
+                writer = stack.enter_context(
+                    GarmentLayerWriter(
+                        output, info, [_garment_frames(template, garment_method, body.name)],
+                        motion.time_codes, clip_threshold=clip_threshold, root_layer=root,
+                    )
+                )  # fmt: skip
+            writer.add([points])
+            seconds["write"] += time.perf_counter() - start
+            done += len(points)
+            if progress is not None:
+                progress(done)
+        start = time.perf_counter()
+    seconds["write"] += time.perf_counter() - start  # the files renamed into place
+    assert writer is not None
+    return DressResult(
+        frames=motion.num_frames,
+        vertices=len(template.vertices),
+        seconds=seconds,
+        outputs=writer.outputs,
+        method=garment_method.name,
+        garment=template.name,
+    )
 
-    start = time.perf_counter()
-    frames_out = GarmentFrames(
+
+def _garment_frames(template: GarmentTemplate, method: GarmentMethod, body: str) -> GarmentFrames:
+    """The static description of the garment layer's mesh (no points: they are streamed)."""
+    return GarmentFrames(
         name=template.name,
         garment_type=template.name,
         faces=template.faces,
         uvs=template.uvs,
-        points=points,
-        method=garment_method.name,
+        points=np.zeros((0, len(template.vertices), 3), dtype=np.float32),
+        method=method.name,
         model=f"{template.name}-{template.lod}",
-        model_version=garment_method.version,
-        body_model=body.name,
-        solver_settings=json.dumps(garment_method.settings, sort_keys=True),
-    )
-    outputs = write_garment_layer(
-        output,
-        info,
-        [frames_out],
-        motion.time_codes,
-        clip_threshold=clip_threshold,
-        root_layer=root,
-    )
-    seconds["write"] = time.perf_counter() - start
-    return DressResult(
-        frames=motion.num_frames,
-        vertices=int(points.shape[1]),
-        seconds=seconds,
-        outputs=outputs,
-        method=garment_method.name,
-        garment=template.name,
+        model_version=method.version,
+        body_model=body,
+        solver_settings=json.dumps(method.settings, sort_keys=True),
     )

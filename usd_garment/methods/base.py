@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Protocol
 
 import numpy as np
@@ -61,3 +61,38 @@ def get_method(name: str) -> GarmentMethod:
     if name not in _REGISTRY:
         raise ValueError(f"unknown method '{name}' (available: {', '.join(available_methods())})")
     return _REGISTRY[name]()
+
+
+def predict_chunks(
+    method: GarmentMethod,
+    motion: SmplMotion,
+    body: BodyModel,
+    template: GarmentTemplate,
+    chunk: int,
+    progress: Progress | None = None,
+) -> Iterator[np.ndarray]:
+    """The posed garment of ``method`` in consecutive chunks ``(t ≤ chunk, N, 3)`` float32
+    (canonical frame, m), frames in order.
+
+    Methods that pose frames chunk by chunk (``predict_stream(motion, body, template, chunk)``,
+    e.g. skinning and the learned method) hold one chunk at a time; the others (the simulation)
+    compute the whole sequence with ``predict`` first, reporting to ``progress`` as they go.
+    """
+    stream = getattr(method, "predict_stream", None)
+    if stream is not None:
+        yield from stream(motion, body, template, chunk)
+        return
+    points = method.predict(motion, body, template, progress)
+    for s in range(0, len(points), chunk):
+        yield points[s : s + chunk]
+
+
+def gather_chunks(chunks: Iterator[np.ndarray], progress: Progress | None = None) -> np.ndarray:
+    """The frames of ``chunks`` in one ``(T, N, 3)`` array; ``progress`` after each chunk."""
+    parts, done = [], 0
+    for part in chunks:
+        parts.append(part)
+        done += len(part)
+        if progress is not None:
+            progress(done)
+    return np.concatenate(parts)

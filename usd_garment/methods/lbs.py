@@ -3,6 +3,8 @@ nearest rest-body vertex (TailorNet / Santesteban-2019 style), with and without 
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import numpy as np
 import torch
 from scipy.spatial import cKDTree
@@ -11,7 +13,7 @@ from usd_garment.body.lbs import blend_shapes, skin
 from usd_garment.body.model import BodyModel
 from usd_garment.eval.body_distance import BodySurface
 from usd_garment.garment.template import GarmentTemplate
-from usd_garment.methods.base import Progress
+from usd_garment.methods.base import Progress, gather_chunks
 from usd_garment.methods.postprocess import PUSH_OUT_EPS, PUSH_OUT_PASSES, push_out
 from usd_garment.motion.sequence import SmplMotion
 
@@ -41,6 +43,16 @@ class LbsMethod:
         progress: Progress | None = None,
     ) -> np.ndarray:
         """Posed garment points ``(T, N, 3)`` float32, canonical frame (m)."""
+        return gather_chunks(self.predict_stream(motion, body, template), progress)
+
+    def predict_stream(
+        self,
+        motion: SmplMotion,
+        body: BodyModel,
+        template: GarmentTemplate,
+        chunk: int = FRAMES_PER_CHUNK,
+    ) -> Iterator[np.ndarray]:
+        """Posed garment points in consecutive chunks ``(t ≤ chunk, N, 3)`` float32 (m)."""
         idx = torch.from_numpy(nearest_body_vertex(body, template))
         weights = body.weights[idx]  # (N, J)
         betas = torch.as_tensor(motion.betas, dtype=torch.float32)[None]
@@ -49,19 +61,14 @@ class LbsMethod:
         surface = BodySurface(body.faces.numpy(), body.num_vertices) if self.push_out else None
         pose = torch.as_tensor(motion.pose, dtype=torch.float32)
         trans = torch.as_tensor(motion.trans, dtype=torch.float32)
-        t_frames = motion.num_frames
-        out = np.empty((t_frames, rest.shape[1], 3), dtype=np.float32)
-        with torch.no_grad():
-            for s in range(0, t_frames, FRAMES_PER_CHUNK):
-                e = min(s + FRAMES_PER_CHUNK, t_frames)
+        for s in range(0, motion.num_frames, chunk):
+            e = min(s + chunk, motion.num_frames)
+            with torch.no_grad():
                 posed = body(betas[0], pose[s:e], trans[s:e])
                 points = skin(rest.expand(e - s, -1, -1), weights, posed.transforms).numpy()
-                if surface is not None:
-                    points = push_out(points, posed.vertices.numpy(), surface)
-                out[s:e] = points
-                if progress is not None:
-                    progress(e)
-        return out
+            if surface is not None:
+                points = push_out(points, posed.vertices.numpy(), surface)
+            yield points.astype(np.float32, copy=False)
 
 
 class LbsPushOutMethod(LbsMethod):

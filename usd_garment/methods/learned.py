@@ -10,6 +10,7 @@ GRU's recurrence.
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -20,7 +21,7 @@ from usd_garment.body.model import BodyModel
 from usd_garment.fields.body_fields import BodyFields, load_body_fields
 from usd_garment.garment.model import GarmentModel
 from usd_garment.garment.template import GarmentTemplate
-from usd_garment.methods.base import Progress
+from usd_garment.methods.base import Progress, gather_chunks
 from usd_garment.methods.learned_model import LearnedModel, ModelError, load_learned_model
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.regressor.descriptor import MODEL_FPS, describe_motion
@@ -128,6 +129,22 @@ class LearnedMethod:
         Raises:
             ModelError: no usable model, or one trained on another template.
         """
+        return gather_chunks(self.predict_stream(motion, body, template), progress)
+
+    def predict_stream(
+        self,
+        motion: SmplMotion,
+        body: BodyModel,
+        template: GarmentTemplate,
+        chunk: int = FRAMES_PER_CHUNK,
+    ) -> Iterator[np.ndarray]:
+        """Posed garment points in consecutive chunks ``(t ≤ chunk, N, 3)`` float32 (m): the
+        latent codes of the whole motion first (the GRU, ``(T, L)``: small), then each chunk
+        decoded and posed.
+
+        Raises:
+            ModelError: no usable model, or one trained on another template.
+        """
         model = self.load(template.name, body)
         if len(template.vertices) != model.vertices:
             raise ModelError(
@@ -135,21 +152,19 @@ class LearnedMethod:
                 f"({model.vertices} vertices), not the {template.lod} one "
                 f"({len(template.vertices)} vertices)"
             )
-        fields = self._fields if self._fields is not None else load_body_fields()
-        self._fields = fields
-        garment_model = GarmentModel(body, fields)
+        if self._fields is None:
+            self._fields = load_body_fields()
+        garment_model = GarmentModel(body, self._fields)
         betas = torch.as_tensor(motion.betas, dtype=torch.float32)
         pose = torch.as_tensor(motion.pose, dtype=torch.float32)
         trans = torch.as_tensor(motion.trans, dtype=torch.float32)
         t_frames = motion.num_frames
-        out = np.empty((t_frames, model.vertices, 3), dtype=np.float32)
         with torch.no_grad():
             gamma, _ = describe_motion(motion, model.pose_codec)
             z = to_frames(model.regressor.predict(gamma, betas), motion.fps, t_frames)
-            for s in range(0, t_frames, FRAMES_PER_CHUNK):
-                e = min(s + FRAMES_PER_CHUNK, t_frames)
+        for s in range(0, t_frames, chunk):
+            e = min(s + chunk, t_frames)
+            with torch.no_grad():
                 x = model.vae.decode(z[s:e])
-                out[s:e] = garment_model(x, betas, pose[s:e], trans[s:e]).vertices.numpy()
-                if progress is not None:
-                    progress(e)
-        return out
+                points = garment_model(x, betas, pose[s:e], trans[s:e]).vertices.numpy()
+            yield points

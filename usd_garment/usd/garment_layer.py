@@ -310,54 +310,168 @@ def write_garment_layer(
     Raises:
         ValueError, FileNotFoundError: see :func:`check_outputs`.
     """
-    path = Path(path)
-    root = Path(root_layer) if root_layer is not None else None
-    check_outputs(Path(info.path), path, root)
-    time_codes = np.asarray(time_codes, dtype=np.float64)
-    parent = garment_parent_path(info)
-    parent_to_world, existing = _parent_to_world(info, parent)
-    canonical_to_local = np.asarray(info.canonical_to_world) @ np.linalg.inv(parent_to_world)
-    mirrored = np.linalg.det(canonical_to_local[:3, :3]) < 0
-    default_prim = parent.GetPrefixes()[0].name
-    total = sum(g.points.shape[0] * g.points.shape[1] for g in garments)
-    use_clips = total > clip_threshold
-    clip_dir = path.with_name(f"{path.stem}.clips")
-    main = _new_layer(info, default_prim)
-    topology = _new_layer(info, default_prim) if use_clips else main
-    with Sdf.ChangeBlock():
-        for garment in garments:
-            faces = _oriented_faces(garment, mirrored)
-            mesh_path = parent.AppendChild(garment.name)
-            _author_static(topology, mesh_path, garment, faces, canonical_to_local, existing)
-    _apply_garment_api(topology, parent, garments, info)
-    layers: dict[str, Sdf.Layer] = {}
-    starts = list(range(0, len(time_codes), clip_frames)) if use_clips else [0]
-    clip_layers = [_new_layer(info, default_prim) for _ in starts] if use_clips else [main]
-    with Sdf.ChangeBlock():
-        for garment in garments:
-            faces = _oriented_faces(garment, mirrored)
-            mesh_path = parent.AppendChild(garment.name)
-            pts = np.asarray(garment.points, dtype=np.float64)
-            local = pts @ canonical_to_local[:3, :3] + canonical_to_local[3, :3]
-            for layer, s in zip(clip_layers, starts, strict=True):
-                e = min(s + clip_frames + 1, len(time_codes)) if use_clips else len(time_codes)
-                _author_samples(layer, mesh_path, local[s:e], faces, time_codes[s:e])
-        if use_clips:
-            _author_clips(main, parent, garments, existing, time_codes, starts, clip_dir.name)
-            layers[TOPOLOGY_NAME] = topology
-            layers[MANIFEST_NAME] = _manifest(info, default_prim, parent, garments)
-            layers.update({CLIP_NAME.format(k): layer for k, layer in enumerate(clip_layers)})
-    with ExitStack() as stack:
-        if root is not None:
-            tmp_root = stack.enter_context(atomic_output(root))
-            _export(_root_layer(info, default_prim, path, root), tmp_root)
-        tmp_main = stack.enter_context(atomic_output(path))
-        _export(main, tmp_main)
-        if use_clips:
-            tmp_clips = stack.enter_context(_atomic_folder(clip_dir))
-            for name, layer in layers.items():
-                _export(layer, tmp_clips / name)
-    return [path] + ([clip_dir] if use_clips else []) + ([root] if root is not None else [])
+    with GarmentLayerWriter(
+        path, info, garments, time_codes, clip_threshold=clip_threshold,
+        clip_frames=clip_frames, root_layer=root_layer,
+    ) as writer:  # fmt: skip
+        writer.add([g.points for g in garments])
+    return writer.outputs
+
+
+class GarmentLayerWriter:
+    """Writes a garment layer frames-chunk by frames-chunk (the streaming form of
+    :func:`write_garment_layer`; same files). With value clips, each clip file is written as
+    soon as its frames are in, so memory stays bounded by one clip whatever the length; without,
+    the samples gather in one layer (at most ``clip_threshold`` frames × vertices).
+
+    Use as a context manager: the files appear (renamed from temporary ones) when the block
+    ends without error, after every frame was added; on error nothing is left behind.
+
+    Args:
+        path, info, time_codes, clip_threshold, clip_frames, root_layer: as for
+            :func:`write_garment_layer`.
+        garments: the garments' static description (their ``points`` are not read).
+
+    Attributes:
+        outputs: the paths written, once the block has ended.
+
+    Raises:
+        ValueError, FileNotFoundError: see :func:`check_outputs`.
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        info: StageInfo,
+        garments: list[GarmentFrames],
+        time_codes: np.ndarray,
+        *,
+        clip_threshold: int = CLIP_THRESHOLD,
+        clip_frames: int = CLIP_FRAMES,
+        root_layer: str | Path | None = None,
+    ) -> None:
+        self.path = Path(path)
+        self.root = Path(root_layer) if root_layer is not None else None
+        check_outputs(Path(info.path), self.path, self.root)
+        self.info, self.garments, self.clip_frames = info, garments, clip_frames
+        self.time_codes = np.asarray(time_codes, dtype=np.float64)
+        self.parent = garment_parent_path(info)
+        parent_to_world, self.existing = _parent_to_world(info, self.parent)
+        self.canonical_to_local = np.asarray(info.canonical_to_world) @ np.linalg.inv(
+            parent_to_world
+        )
+        mirrored = np.linalg.det(self.canonical_to_local[:3, :3]) < 0
+        self.faces = [_oriented_faces(g, mirrored) for g in garments]
+        self.default_prim = self.parent.GetPrefixes()[0].name
+        vertices = sum(len(g.uvs) for g in garments)
+        self.use_clips = len(self.time_codes) * vertices > clip_threshold
+        self.clip_dir = self.path.with_name(f"{self.path.stem}.clips")
+        self.main = _new_layer(info, self.default_prim)
+        self.topology = _new_layer(info, self.default_prim) if self.use_clips else self.main
+        with Sdf.ChangeBlock():
+            for garment, faces in zip(garments, self.faces, strict=True):
+                mesh_path = self.parent.AppendChild(garment.name)
+                _author_static(
+                    self.topology, mesh_path, garment, faces, self.canonical_to_local,
+                    self.existing,
+                )  # fmt: skip
+        _apply_garment_api(self.topology, self.parent, garments, info)
+        self.outputs: list[Path] = []
+        self._stack = ExitStack()
+        self._pending: list[np.ndarray] = [np.zeros((0, len(g.uvs), 3)) for g in garments]
+        self._start = 0  # frame of the first pending frame
+        self._added = 0
+        self._clips = 0
+        self._tmp_clips: Path | None = None
+
+    def __enter__(self) -> GarmentLayerWriter:
+        if self.use_clips:
+            self._tmp_clips = self._stack.enter_context(_atomic_folder(self.clip_dir))
+        return self
+
+    def add(self, points: list[np.ndarray]) -> None:
+        """Append the next frames: one ``(t, N_g, 3)`` array per garment (canonical frame, m).
+
+        Raises:
+            ValueError: a count of garments, frames or vertices that does not fit.
+        """
+        if len(points) != len(self.garments):
+            raise ValueError(f"expected points of {len(self.garments)} garments")
+        count = {len(p) for p in points}
+        if len(count) != 1 or self._added + count.pop() > len(self.time_codes):
+            raise ValueError("every garment needs the same frames, no more than the time codes")
+        m = self.canonical_to_local
+        for g, pts in enumerate(points):
+            local = np.asarray(pts, dtype=np.float64) @ m[:3, :3] + m[3, :3]
+            self._pending[g] = np.concatenate([self._pending[g], local])
+        self._added += len(points[0])
+        if not self.use_clips:
+            self._flush(self.main, len(self._pending[0]))
+            return
+        while len(self._pending[0]) > self.clip_frames:  # a whole clip and its overlap frame
+            self._write_clip(self.clip_frames + 1)
+
+    def _flush(self, layer: Sdf.Layer, frames: int) -> None:
+        """Author the first ``frames`` pending frames into ``layer``."""
+        codes = self.time_codes[self._start : self._start + frames]
+        with Sdf.ChangeBlock():
+            for garment, faces, pending in zip(self.garments, self.faces, self._pending,
+                                               strict=True):  # fmt: skip
+                mesh_path = self.parent.AppendChild(garment.name)
+                _author_samples(layer, mesh_path, pending[:frames], faces, codes)
+        keep = frames - 1 if self.use_clips else frames  # clips overlap by one frame
+        self._pending = [p[keep:] for p in self._pending]
+        self._start += keep
+
+    def _write_clip(self, frames: int) -> None:
+        layer = _new_layer(self.info, self.default_prim)
+        self._flush(layer, frames)
+        assert self._tmp_clips is not None
+        _export(layer, self._tmp_clips / CLIP_NAME.format(self._clips))
+        self._clips += 1
+
+    def __exit__(
+        self, kind: type[BaseException] | None, exc: BaseException | None, tb: object
+    ) -> None:
+        if kind is not None:  # remove the temporaries; the error goes on
+            self._stack.__exit__(kind, exc, tb)
+            return
+        files = ExitStack()
+        try:
+            if self._added != len(self.time_codes):
+                raise ValueError(
+                    f"{self._added} frames written for {len(self.time_codes)} time codes"
+                )
+            self._finish(files)
+        except BaseException as error:
+            files.__exit__(type(error), error, error.__traceback__)
+            self._stack.__exit__(type(error), error, error.__traceback__)
+            raise
+        self._stack.close()  # the clip folder first: the layer refers to it
+        files.close()
+        self.outputs = (
+            [self.path]
+            + ([self.clip_dir] if self.use_clips else [])
+            + ([self.root] if self.root is not None else [])
+        )
+
+    def _finish(self, files: ExitStack) -> None:
+        """The last clip, the clip metadata, topology and manifest; the layer and root layer
+        exported to temporary files held by ``files``."""
+        if self.use_clips:
+            self._write_clip(len(self._pending[0]))
+            starts = [k * self.clip_frames for k in range(self._clips)]
+            with Sdf.ChangeBlock():
+                _author_clips(self.main, self.parent, self.garments, self.existing,
+                              self.time_codes, starts, self.clip_dir.name)  # fmt: skip
+            assert self._tmp_clips is not None
+            _export(self.topology, self._tmp_clips / TOPOLOGY_NAME)
+            manifest = _manifest(self.info, self.default_prim, self.parent, self.garments)
+            _export(manifest, self._tmp_clips / MANIFEST_NAME)
+        if self.root is not None:
+            tmp_root = files.enter_context(atomic_output(self.root))
+            _export(_root_layer(self.info, self.default_prim, self.path, self.root), tmp_root)
+        _export(self.main, files.enter_context(atomic_output(self.path)))
 
 
 def _author_clips(
