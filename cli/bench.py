@@ -9,9 +9,11 @@ from pathlib import Path
 import click
 from tqdm import tqdm
 
+from usd_garment.body.io import load_body_model
 from usd_garment.cli.errors import user_errors
 from usd_garment.eval.bench import BenchInput, BenchMethod, chart_points, run_bench, write_report
 from usd_garment.eval.bench_plots import plot_chart, plot_collision_curves
+from usd_garment.eval.stress import LONG_FRAMES, write_stress_inputs
 from usd_garment.garment.template import GARMENT_NAMES, LODS
 from usd_garment.methods import available_methods
 from usd_garment.methods.learned import LearnedMethod, shipped_model
@@ -120,6 +122,26 @@ def _methods(
     show_default=True,
     help="Also run the physics simulation on the first N frames of each input (slow).",
 )
+@click.option(
+    "--stress",
+    is_flag=True,
+    help="Add the stress suite: β₁ = ±3, motion 2× and 4× faster, a long sequence, self-contact "
+    "poses, root jumps (and each --capture).",
+)
+@click.option(
+    "--stress-frames",
+    type=click.IntRange(2),
+    default=LONG_FRAMES,
+    show_default=True,
+    help="Frames of the stress suite's long sequence.",
+)
+@click.option(
+    "--capture",
+    "captures",
+    multiple=True,
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="With --stress: a BVH capture to add (repeat), imported at 30 fps.",
+)
 @click.option("--garment", type=click.Choice(GARMENT_NAMES), default="tshirt", show_default=True)
 def bench(
     inputs: tuple[Path, ...],
@@ -131,6 +153,9 @@ def bench(
     models: tuple[str, ...],
     lods: tuple[str, ...],
     simulation_frames: int,
+    stress: bool,
+    stress_frames: int,
+    captures: tuple[Path, ...],
     garment: str,
 ) -> None:
     """Dress every INPUT (animated body layers) with every method at every level of detail;
@@ -153,16 +178,23 @@ def bench(
                     layers.names, layers.bodies, layers.garments, strict=True
                 )
             ]
-        if not cases:
-            raise click.UsageError("give INPUT... or --manifest")
+        if captures and not stress:
+            raise click.UsageError("--capture is for --stress")
+        if not cases and not stress:
+            raise click.UsageError("give INPUT..., --manifest or --stress")
         for case in cases:
             for path in (case.body, case.reference):
                 if path is not None and not path.is_file():
                     raise click.BadParameter(f"{path}: no such file")
         methods = _methods(names, _labelled_models(models), lods or LODS, garment,
                            simulation_frames)  # fmt: skip
-    runs = sum(len(m.lods) for m in methods) * len(cases)
     output.mkdir(parents=True, exist_ok=True)
+    if stress:
+        with user_errors():
+            cases += write_stress_inputs(
+                output / "inputs", load_body_model(), long_frames=stress_frames, captures=captures
+            )
+    runs = sum(len(m.lods) for m in methods) * len(cases)
     with tqdm(total=runs, desc="bench", unit="run", leave=False, disable=None) as bar:
         rows = run_bench(cases, methods, output, garment=garment, on_row=lambda _: bar.update())
     wall = time.perf_counter() - started

@@ -83,9 +83,30 @@ def test_a_failing_method_is_a_row_not_the_end(tmp_path: Path, walk: Path) -> No
         (["--model", "nolabel"], "expected LABEL=DIR"),
         (["--reference", "a.usdc", "--reference", "b.usdc"], "one --reference per INPUT"),
         (["--method", "learned", "--garment", "dress"], "no trained model ships"),
+        (["--capture", "clip.bvh"], "--capture is for --stress"),
     ],
 )
 def test_bench_bad_input(tmp_path: Path, walk: Path, extra: list[str], message: str) -> None:
     result = CliRunner().invoke(main, ["bench", str(walk), "-o", str(tmp_path / "r"), *extra])
     assert result.exit_code != 0 and message in result.output, result.output
     assert "Traceback" not in result.output and not (tmp_path / "r").exists()
+
+
+def test_stress_inputs_are_what_they_say(tmp_path: Path, body_model: BodyModel) -> None:
+    from usd_garment.eval.stress import STRESS_FRAMES, stress_motions, write_stress_inputs
+    from usd_garment.usd.read import read_smpl_motion
+
+    names = ["shape_beta1_plus3", "fast_x4", "root_jumps", "long_40"]
+    inputs = write_stress_inputs(tmp_path, body_model, long_frames=40, names=names)
+    assert [case.name for case in inputs] == names
+    motions = {case.name: read_smpl_motion(case.body, body_model)[0] for case in inputs}
+    assert motions["shape_beta1_plus3"].betas[0] == pytest.approx(3.0)
+    assert motions["long_40"].num_frames == 40
+    assert motions["fast_x4"].num_frames == 2 * STRESS_FRAMES and motions["fast_x4"].fps == 30
+    # The root jumps: 0.5 m sideways in one frame, the heading snapped by 90 degrees.
+    step = np.linalg.norm(np.diff(motions["root_jumps"].trans, axis=0), axis=1)
+    assert step.max() > 0.45 and np.sort(step)[-2] < 0.1
+    made = stress_motions(body_model, long_frames=40)
+    assert set(made) >= set(names) | {"arms_folded", "hands_on_hips", "fast_x2"}
+    with pytest.raises(ValueError, match="unknown stress case 'nope'"):
+        write_stress_inputs(tmp_path, body_model, names=["nope"])
