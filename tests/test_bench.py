@@ -53,10 +53,11 @@ def test_bench_command_writes_table_chart_and_curves(tmp_path: Path, walk: Path)
         rows = {(r["method"], r["lod"]): r for r in csv.DictReader(handle)}
     assert set(rows) == {(m, lod) for m in ("lbs", "lbs+postprocess") for lod in ("low", "medium")}
     assert all(int(r["frames"]) == 6 and float(r["frames_per_second"]) > 0 for r in rows.values())
-    # Error against the reference where the mesh is the reference's (low), none elsewhere.
+    # Error against the reference (low): zero for itself; at medium, the reference is carried
+    # to the medium mesh first (both skinned the same way: well under a millimetre apart).
     assert float(rows["lbs", "low"]["reference_mm"]) == pytest.approx(0.0, abs=1e-4)
     assert float(rows["lbs+postprocess", "low"]["reference_mm"]) >= 0.0
-    assert rows["lbs", "medium"]["reference_mm"] == ""
+    assert 0.0 < float(rows["lbs", "medium"]["reference_mm"]) < 1.0
     # The push-out leaves no vertex inside elsewhere, lbs may; both are measured per frame.
     assert float(rows["lbs+postprocess", "low"]["inside_elsewhere_share"]) <= float(
         rows["lbs", "low"]["inside_elsewhere_share"]

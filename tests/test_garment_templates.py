@@ -164,3 +164,17 @@ def test_inside_mesh_sphere() -> None:
     radius = np.linalg.norm(grid.points(idx), axis=1).reshape(grid.shape)
     clear = np.abs(radius - 0.5) > 0.01
     np.testing.assert_array_equal(inside[clear], radius[clear] < 0.5)
+
+
+def test_lod_transfer_carries_the_rest_shape_within_a_millimetre_or_so() -> None:
+    from usd_garment.garment.lod import carry_to_lod, lod_with_vertices, transfer_weights
+
+    high, low = load_template("tshirt", "high"), load_template("tshirt", "low")
+    weights = transfer_weights(high, low)
+    np.testing.assert_allclose(np.asarray(weights.sum(axis=1)).ravel(), 1.0, atol=1e-6)
+    assert (weights.getnnz(axis=1) <= 3).all()
+    carried = carry_to_lod(np.stack([high.vertices, high.vertices + 1.0]), "tshirt", "high", "low")
+    gap = np.linalg.norm(carried - np.stack([low.vertices, low.vertices + 1.0]), axis=-1)
+    assert carried.shape == (2, len(low.vertices), 3) and gap.max() < 1.5e-3
+    assert lod_with_vertices("tshirt", len(low.vertices)) == "low"
+    assert lod_with_vertices("tshirt", 7) is None

@@ -20,7 +20,6 @@ from usd_garment.dress import dress
 from usd_garment.eval.evaluate import evaluate_layer
 from usd_garment.methods import GarmentMethod, get_method
 from usd_garment.methods.learned import LearnedMethod
-from usd_garment.usd.garment_read import read_garment_layer
 from usd_garment.usd.read import read_smpl_motion
 
 
@@ -75,8 +74,8 @@ class BenchRow:
         frames, vertices: the size of the output.
         seconds: wall time (s) of read, compute and write inside the stage processor.
         frames_per_second: frames over the total of ``seconds``.
-        summary: the sequence figures of :class:`GarmentMetrics` (``reference_mm`` None
-            without a reference of the same mesh).
+        summary: the sequence figures of :class:`GarmentMetrics` (``reference_mm``: against
+            the reference carried to this level of detail; None without a reference).
         inside_elsewhere: ``(T,)`` per-frame share inside the body elsewhere.
         inside_forced: ``(T,)`` per-frame share inside where the body is pressed into itself.
         error: the failure's one-line message when the method failed on this input, else "".
@@ -108,11 +107,6 @@ CSV_SUMMARY = (
 )
 
 
-def _reference_vertices(reference: Path) -> int:
-    points, _, _ = read_garment_layer(reference)
-    return int(points.shape[1])
-
-
 def run_bench(
     inputs: Sequence[BenchInput],
     methods: Sequence[BenchMethod],
@@ -131,11 +125,6 @@ def run_bench(
     """
     layers = Path(folder) / "layers"
     layers.mkdir(parents=True, exist_ok=True)
-    reference_sizes = {
-        case.reference: _reference_vertices(case.reference)
-        for case in inputs
-        if case.reference is not None
-    }
     body = load_body_model()
     rows = []
     for case in inputs:
@@ -150,10 +139,7 @@ def run_bench(
                         case.body, out, garment=garment, method=entry.instance(), lod=lod,
                         frames=frames,
                     )  # fmt: skip
-                    same_mesh = reference_sizes.get(case.reference) == result.vertices
-                    metrics, _ = evaluate_layer(
-                        out, case.body, case.reference if same_mesh else None, garment
-                    )
+                    metrics, _ = evaluate_layer(out, case.body, case.reference, garment)
                 except Exception as exc:  # a failing method is a result here, not the end
                     row.error = f"{type(exc).__name__}: {(str(exc) or '-').splitlines()[0]}"
                 else:

@@ -11,6 +11,8 @@ import torch
 from usd_garment.body.io import load_body_model
 from usd_garment.body.model import BodyModel
 from usd_garment.eval.metrics import GarmentMetrics, evaluate_garment
+from usd_garment.garment.lod import carry_to_lod, lod_with_vertices
+from usd_garment.garment.template import GARMENT_NAMES
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.usd.errors import UsdInputError
 from usd_garment.usd.garment_read import read_garment_layer
@@ -41,6 +43,23 @@ def _frame_index(codes: np.ndarray, wanted: np.ndarray, where: str) -> np.ndarra
     return idx
 
 
+def _same_lod(reference: np.ndarray, vertices: int, garment: str, where: str | Path) -> np.ndarray:
+    """``reference`` ``(T, N_ref, 3)`` carried to the level of detail of ``garment`` that has
+    ``vertices`` vertices, when both are levels of detail of that committed garment.
+
+    Raises:
+        UsdInputError: they are not.
+    """
+    source, target = (lod_with_vertices(garment, n) if garment in GARMENT_NAMES else None
+                      for n in (reference.shape[1], vertices))  # fmt: skip
+    if source is None or target is None:
+        raise UsdInputError(
+            f"{where}: {reference.shape[1]} vertices, the garment has {vertices} (and they are "
+            "not two levels of detail of one garment)"
+        )
+    return carry_to_lod(reference, garment, source, target)
+
+
 def evaluate_layer(
     garment_layer: str | Path,
     body_input: str | Path,
@@ -49,7 +68,9 @@ def evaluate_layer(
     body_model: str | Path | None = None,
     skeleton: str | None = None,
 ) -> tuple[GarmentMetrics, np.ndarray]:
-    """Metrics of the garment of ``garment_layer`` on the body of ``body_input``.
+    """Metrics of the garment of ``garment_layer`` on the body of ``body_input``; against a
+    ``reference`` layer of another level of detail of the same garment, the reference is
+    carried to the garment's level of detail first (:mod:`usd_garment.garment.lod`).
 
     Returns:
         The metrics and the ``(T,)`` time codes they refer to.
@@ -66,9 +87,7 @@ def evaluate_layer(
     if reference is not None:
         ref_points, _, ref_info = read_garment_layer(reference, garment)
         if ref_points.shape[1] != points.shape[1]:
-            raise UsdInputError(
-                f"{reference}: {ref_points.shape[1]} vertices, the garment has {points.shape[1]}"
-            )
+            ref_points = _same_lod(ref_points, points.shape[1], Path(info.mesh).name, reference)
         ref = ref_points[_frame_index(ref_info.time_codes, info.time_codes, str(reference))]
     step = float(np.median(np.diff(info.time_codes))) if len(info.time_codes) > 1 else 1.0
     fps = info.time_codes_per_second / step
