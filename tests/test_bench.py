@@ -46,11 +46,13 @@ def test_bench_command_writes_table_chart_and_curves(tmp_path: Path, walk: Path)
             "lbs+postprocess", "--lod", "low", "--lod", "medium", "-o", str(report)]  # fmt: skip
     result = CliRunner().invoke(main, args)
     assert result.exit_code == 0, result.output
-    assert "4 runs in" in result.output
+    assert "5 runs in" in result.output  # 2 methods x 2 levels of detail, and the reference
     for name in ("report.json", "report.csv", "chart.png", "collisions.png"):
         assert (report / name).stat().st_size > 0, name
     with open(report / "report.csv") as handle:
         rows = {(r["method"], r["lod"]): r for r in csv.DictReader(handle)}
+    reference = rows.pop(("simulation (reference)", "-"))
+    assert int(reference["frames"]) == 6 and reference["frames_per_second"] == ""
     assert set(rows) == {(m, lod) for m in ("lbs", "lbs+postprocess") for lod in ("low", "medium")}
     assert all(int(r["frames"]) == 6 and float(r["frames_per_second"]) > 0 for r in rows.values())
     # Error against the reference (low): zero for itself; at medium, the reference is carried
@@ -63,7 +65,7 @@ def test_bench_command_writes_table_chart_and_curves(tmp_path: Path, walk: Path)
         rows["lbs", "low"]["inside_elsewhere_share"]
     )
     payload = json.loads((report / "report.json").read_text())
-    assert len(payload["chart"]) == 4 and payload["wall_seconds"] > 0
+    assert len(payload["chart"]) == 5 and payload["wall_seconds"] > 0
     assert all(len(r["inside_elsewhere"]) == 6 for r in payload["rows"])
 
 

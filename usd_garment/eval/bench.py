@@ -115,7 +115,8 @@ def run_bench(
     garment: str = "tshirt",
     on_row: Callable[[BenchRow], None] | None = None,
 ) -> list[BenchRow]:
-    """Dress every input with every method at each of its levels of detail and evaluate it.
+    """Dress every input with every method at each of its levels of detail and evaluate it;
+    an input's reference simulation gets a row of its own (:data:`REFERENCE_LABEL`, no speed).
 
     Layers go to ``folder/layers``. A method that raises on an input gets a row with ``error``
     set and the run goes on (the stress suite wants to see failures, not stop at them).
@@ -129,6 +130,10 @@ def run_bench(
     rows = []
     for case in inputs:
         length = read_smpl_motion(case.body, body)[0].num_frames
+        if case.reference is not None:
+            rows.append(_reference_row(case, garment))
+            if on_row is not None:
+                on_row(rows[-1])
         for entry in methods:
             for lod in entry.lods:
                 row = BenchRow(case.name, entry.label, entry.method, lod)
@@ -153,6 +158,27 @@ def run_bench(
                 if on_row is not None:
                     on_row(row)
     return rows
+
+
+#: The label of the rows that measure an input's reference simulation itself.
+REFERENCE_LABEL = "simulation (reference)"
+
+
+def _reference_row(case: BenchInput, garment: str) -> BenchRow:
+    """The figures of ``case``'s reference simulation itself (collisions, jitter; no speed:
+    it was not run here)."""
+    assert case.reference is not None
+    row = BenchRow(case.name, REFERENCE_LABEL, "reference", "-")
+    try:
+        metrics, codes = evaluate_layer(case.reference, case.body, None, garment)
+    except Exception as exc:  # an unreadable reference is reported like a failed method
+        row.error = f"{type(exc).__name__}: {(str(exc) or '-').splitlines()[0]}"
+        return row
+    row.frames = len(codes)
+    row.summary = metrics.summary()
+    row.inside_elsewhere = [float(v) for v in metrics.inside_elsewhere_share]
+    row.inside_forced = [float(v) for v in metrics.inside_forced_share]
+    return row
 
 
 @dataclass
