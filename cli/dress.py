@@ -62,6 +62,14 @@ from usd_garment.methods.learned import LearnedMethod, default_method
     default=None,
     help="Also write a layer that sublayers the garment layer and the input.",
 )
+@click.option(
+    "--proxy",
+    "proxy_lod",
+    type=click.Choice(("medium", "low")),
+    default=None,
+    help="Also write a decimated proxy-purpose mesh of the garment at this level of detail "
+    "(its points carried from the computed garment; viewports draw it, renders the full one).",
+)
 @json_option()
 def dress(
     input_path: Path,
@@ -75,6 +83,7 @@ def dress(
     skeleton: str | None,
     betas: str | None,
     root_layer: Path | None,
+    proxy_lod: str | None,
     as_json: bool,
 ) -> None:
     """Dress the animated SMPL body of INPUT; write the garment layer to OUTPUT."""
@@ -95,6 +104,7 @@ def dress(
             skeleton=skeleton,
             betas=beta_values,
             root_layer=root_layer,
+            proxy_lod=proxy_lod,
             on_read=bar.on_read,
             progress=bar.progress,
         )

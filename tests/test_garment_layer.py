@@ -284,3 +284,32 @@ def test_unusual_rigs_give_the_same_garment(tmp_path: Path, body_model: BodyMode
         np.testing.assert_allclose(canonical[::step], plain, atol=tol)
         # The mesh lands at the same place in the stage's world, whatever /World's transform.
         np.testing.assert_allclose(world, canonical @ to_stage[:3, :3], atol=tol * 100)
+
+
+def test_proxy_mesh_is_the_garment_carried_to_a_lower_lod(
+    tmp_path: Path, amass_layer: Path
+) -> None:
+    from usd_garment.garment.library import load_template
+    from usd_garment.garment.lod import carry_to_lod
+
+    out = tmp_path / "g.usda"
+    args = ["dress", str(amass_layer), "-o", str(out), "--method", "lbs", "--lod", "medium"]
+    result = CliRunner().invoke(main, [*args, "--proxy", "low"])
+    assert result.exit_code == 0, result.output
+    points, _, info = read_garment_layer(out)  # the proxy is not a garment of its own
+    assert info.mesh.endswith("/tshirt")
+    assert points.shape[1] == len(load_template("tshirt", "medium").vertices)
+    stage = Usd.Stage.Open(str(out))
+    garment = stage.GetPrimAtPath(info.mesh)
+    proxy = stage.GetPrimAtPath(info.mesh + "_proxy")
+    assert UsdGeom.Imageable(garment).GetPurposeAttr().Get() == UsdGeom.Tokens.render
+    assert UsdGeom.Imageable(proxy).GetPurposeAttr().Get() == UsdGeom.Tokens.proxy
+    assert UsdGeom.Imageable(garment).GetProxyPrimRel().GetTargets() == [proxy.GetPath()]
+    assert validate_layer(out) == []
+    attr = UsdGeom.Mesh(proxy).GetPointsAttr()
+    local = np.stack([np.asarray(attr.Get(t)) for t in info.time_codes.tolist()])
+    m = info.canonical_to_local
+    carried = carry_to_lod(points, "tshirt", "medium", "low") @ m[:3, :3] + m[3, :3]
+    np.testing.assert_allclose(local, carried, atol=1e-5)
+    bad = CliRunner().invoke(main, [*args[:-1], "low", "--proxy", "low"])
+    assert bad.exit_code == 1 and "lower level of detail" in bad.output

@@ -14,6 +14,7 @@ import numpy as np
 
 from usd_garment.body.io import load_body_model
 from usd_garment.garment.library import load_template
+from usd_garment.garment.lod import carry, transfer_weights
 from usd_garment.garment.template import GARMENT_NAMES, LODS, GarmentTemplate
 from usd_garment.methods import GarmentMethod, get_method
 from usd_garment.methods.base import predict_chunks
@@ -77,6 +78,7 @@ def dress(
     template: GarmentTemplate | None = None,
     clip_threshold: int = CLIP_THRESHOLD,
     frames_per_chunk: int = FRAMES_PER_CHUNK,
+    proxy_lod: str | None = None,
     on_read: Callable[[int], None] | None = None,
     progress: Callable[[int], None] | None = None,
 ) -> DressResult:
@@ -95,6 +97,9 @@ def dress(
         root_layer: also write a layer that sublayers the garment layer and the input.
         template: a ready template (tests, benchmarks); skips loading one.
         clip_threshold: frames × vertices above which the layer uses value clips.
+        proxy_lod: also write a proxy-purpose mesh ``<garment>_proxy`` at this (lower) level
+            of detail, its points carried from the computed garment; the garment then has the
+            render purpose and a ``proxyPrim`` to it.
         frames_per_chunk: frames computed and written at once; with value clips, memory stays
             bounded by a chunk and a clip whatever the length (methods that pose the whole
             sequence at once, the simulation, hold all of it).
@@ -119,6 +124,12 @@ def dress(
     motion, info = read_smpl_motion(input_path, body, skeleton, frames, betas)
     if template is None:
         template = load_template(garment, lod=lod, body_model_path=body_model)
+    proxy = None
+    if proxy_lod is not None:
+        if proxy_lod not in LODS or LODS[proxy_lod] >= LODS[template.lod]:
+            raise ValueError(f"the proxy must be a lower level of detail than '{template.lod}'")
+        proxy = load_template(template.name, lod=proxy_lod, body_model_path=body_model)
+        weights = transfer_weights(template, proxy)
     seconds["read"] = time.perf_counter() - start
     if on_read is not None:
         on_read(motion.num_frames)
@@ -136,13 +147,18 @@ def dress(
                 break
             start = time.perf_counter()
             if writer is None:  # after the first chunk: a learned method knows its version
+                garments = [_garment_frames(template, garment_method, body.name)]
+                if proxy is not None:
+                    garments[0].purpose = "render"
+                    garments.append(_garment_frames(proxy, garment_method, body.name))
+                    garments[1].name, garments[1].purpose = f"{template.name}_proxy", "proxy"
                 writer = stack.enter_context(
                     GarmentLayerWriter(
-                        output, info, [_garment_frames(template, garment_method, body.name)],
-                        motion.time_codes, clip_threshold=clip_threshold, root_layer=root,
+                        output, info, garments, motion.time_codes, clip_threshold=clip_threshold,
+                        root_layer=root,
                     )
                 )  # fmt: skip
-            writer.add([points])
+            writer.add([points] if proxy is None else [points, carry(points, weights)])
             seconds["write"] += time.perf_counter() - start
             done += len(points)
             if progress is not None:

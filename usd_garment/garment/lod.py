@@ -47,7 +47,12 @@ def carry_to_lod(points: np.ndarray, garment: str, source: str, target: str) -> 
     the ``target`` one ``(T, N_target, 3)`` (same units), through the rest-surface weights."""
     if source == target:
         return points
-    weights = _lod_weights(garment, source, target)
+    return carry(points, _lod_weights(garment, source, target))
+
+
+def carry(points: np.ndarray, weights: sparse.csr_matrix) -> np.ndarray:
+    """Frames ``(T, N_source, 3)`` carried through :func:`transfer_weights` ``(N_target,
+    N_source)`` to ``(T, N_target, 3)``, same dtype."""
     t, n = points.shape[:2]
     flat = np.asarray(points).transpose(1, 0, 2).reshape(n, t * 3)
     return np.asarray(weights @ flat).reshape(-1, t, 3).transpose(1, 0, 2).astype(points.dtype)

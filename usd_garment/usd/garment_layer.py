@@ -61,6 +61,9 @@ class GarmentFrames:
         model_version: version of the model (``garment:modelVersion``).
         body_model: the body model name it was fitted to (``garment:bodyModel``).
         solver_settings: free-form settings string recorded as ``garment:solverSettings``.
+        purpose: the mesh's ``UsdGeom`` purpose ("render", "proxy"; empty: not authored). A
+            "render" garment named ``X`` gets a ``proxyPrim`` relationship to a "proxy" garment
+            named ``X_proxy`` written beside it.
     """
 
     name: str
@@ -73,6 +76,7 @@ class GarmentFrames:
     model_version: str
     body_model: str
     solver_settings: str = ""
+    purpose: str = ""
 
 
 def garment_parent_path(info: StageInfo) -> Sdf.Path:
@@ -164,11 +168,23 @@ def _author_static(
     _set(spec, "primvars:st", Sdf.ValueTypeNames.TexCoord2fArray, uvs).SetInfo(
         "interpolation", UsdGeom.Tokens.vertex
     )
+    if garment.purpose:
+        _set(spec, "purpose", Sdf.ValueTypeNames.Token, garment.purpose, uniform=True)
     matrix = Gf.Matrix4d(*canonical_to_local.reshape(-1).tolist())
     spec.SetInfo("customData", {CANONICAL_TO_LOCAL_KEY: matrix})
     _set(spec, "normals", Sdf.ValueTypeNames.Normal3fArray, None).SetInfo(
         "interpolation", UsdGeom.Tokens.vertex
     )
+
+
+def _link_proxies(layer: Sdf.Layer, parent: Sdf.Path, garments: list[GarmentFrames]) -> None:
+    """``proxyPrim`` from each "render" garment ``X`` to the "proxy" garment ``X_proxy``."""
+    proxies = {g.name for g in garments if g.purpose == "proxy"}
+    for garment in garments:
+        if garment.purpose == "render" and f"{garment.name}_proxy" in proxies:
+            spec = layer.GetPrimAtPath(parent.AppendChild(garment.name))
+            rel = Sdf.RelationshipSpec(spec, "proxyPrim", custom=False)
+            rel.targetPathList.explicitItems = [parent.AppendChild(f"{garment.name}_proxy")]
 
 
 def _apply_garment_api(
@@ -375,6 +391,7 @@ class GarmentLayerWriter:
                     self.topology, mesh_path, garment, faces, self.canonical_to_local,
                     self.existing,
                 )  # fmt: skip
+            _link_proxies(self.topology, self.parent, garments)
         _apply_garment_api(self.topology, self.parent, garments, info)
         self.outputs: list[Path] = []
         self._stack = ExitStack()

@@ -35,11 +35,14 @@ class GarmentLayerInfo:
 
 
 def garment_meshes(stage: Usd.Stage) -> list[Usd.Prim]:
-    """The garment meshes of a stage (meshes carrying our canonical-frame record)."""
+    """The garment meshes of a stage (meshes carrying our canonical-frame record; proxy-purpose
+    meshes, the decimated stand-ins of a garment, are not garments of their own)."""
     return [
         prim
         for prim in stage.Traverse(Usd.PrimAllPrimsPredicate)
-        if prim.IsA(UsdGeom.Mesh) and CANONICAL_TO_LOCAL_KEY in prim.GetCustomData()
+        if prim.IsA(UsdGeom.Mesh)
+        and CANONICAL_TO_LOCAL_KEY in prim.GetCustomData()
+        and UsdGeom.Imageable(prim).GetPurposeAttr().Get() != UsdGeom.Tokens.proxy
     ]
 
 
