@@ -41,9 +41,11 @@ def _methods(
     lods: tuple[str, ...],
     garment: str,
     simulation_frames: int,
+    simulation_lods: tuple[str, ...],
 ) -> list[BenchMethod]:
     """The benched methods: learned ones at the level of detail they were trained on, the
-    others at every one of ``lods``, the simulation on the first ``simulation_frames``."""
+    simulation on the first ``simulation_frames`` at ``simulation_lods``, the others at every
+    one of ``lods``."""
     out = []
     for name in names or DEFAULT_METHODS:
         if name == LearnedMethod.name:
@@ -63,8 +65,8 @@ def _methods(
     out = learned + out
     if simulation_frames > 0 or SimulationMethod.name in names:
         frames = simulation_frames if simulation_frames > 0 else 30
-        out.append(BenchMethod(SimulationMethod.name, SimulationMethod.name, lods=lods,
-                               frames=frames))  # fmt: skip
+        out.append(BenchMethod(SimulationMethod.name, SimulationMethod.name,
+                               lods=simulation_lods, frames=frames))  # fmt: skip
     return out
 
 
@@ -123,6 +125,13 @@ def _methods(
     help="Also run the physics simulation on the first N frames of each input (slow).",
 )
 @click.option(
+    "--simulation-lod",
+    "simulation_lods",
+    multiple=True,
+    type=click.Choice(LODS),
+    help="Levels of detail of the simulation (repeat); default: high.",
+)
+@click.option(
     "--stress",
     is_flag=True,
     help="Add the stress suite: β₁ = ±3, motion 2× and 4× faster, a long sequence, self-contact "
@@ -153,6 +162,7 @@ def bench(
     models: tuple[str, ...],
     lods: tuple[str, ...],
     simulation_frames: int,
+    simulation_lods: tuple[str, ...],
     stress: bool,
     stress_frames: int,
     captures: tuple[Path, ...],
@@ -187,7 +197,7 @@ def bench(
                 if path is not None and not path.is_file():
                     raise click.BadParameter(f"{path}: no such file")
         methods = _methods(names, _labelled_models(models), lods or LODS, garment,
-                           simulation_frames)  # fmt: skip
+                           simulation_frames, simulation_lods or ("high",))  # fmt: skip
     output.mkdir(parents=True, exist_ok=True)
     if stress:
         with user_errors():
