@@ -281,3 +281,24 @@ def test_levels_blend_without_seams() -> None:
     s = fields.shape_dirs(pts)[:, 0, 0]
     assert float(s[x < 0.79].min()) > 1 - 1e-5 and float(s[x > 0.91].abs().max()) < 1e-5
     assert float(s.diff().abs().max()) < 0.011  # 1 mm steps across a 10 cm ramp
+
+
+def test_linearized_fields_agree_with_the_lookup_near_the_anchor() -> None:
+    from usd_garment.garment.library import load_template
+
+    fields = load_body_fields()
+    anchor = torch.as_tensor(load_template("tshirt", "low").vertices)
+    gen = torch.Generator().manual_seed(0)
+    near = anchor + 2e-3 * torch.randn(3, *anchor.shape, generator=gen)  # ~3.5 mm away
+    far = anchor.clone().expand(2, -1, -1).clone()
+    far[:, :10] += 0.05  # 5 cm: beyond the radius, looked up exactly
+    tangent = fields.linearized(anchor)
+    # Near: first order (skinning weights can turn within millimetres next to the body, so a
+    # few per cent at worst, a thousandth on average); far: the exact lookup itself.
+    for points, worst, mean in ((near, 0.03, 1e-3), (far, 1e-6, 1e-6)):
+        exact, approx = fields.all_fields(points), tangent.all_fields(points)
+        for a, b in zip(exact[:2], approx[:2], strict=True):
+            gap = (a - b).abs()
+            assert float(gap.max()) < worst and float(gap.mean()) < mean
+    w = tangent.all_fields(near)[0]
+    assert bool((w >= 0).all()) and torch.allclose(w.sum(-1), torch.ones(()), atol=1e-5)

@@ -10,6 +10,7 @@ joints, K = 10 betas, P = 207 pose features. Blendshape fields are per-point mat
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -40,6 +41,12 @@ def _add_rows(
     if acc is None:
         return parts
     return [a.index_put((rows,), a[rows] + p) for a, p in zip(acc, parts, strict=True)]
+
+
+#: Central-difference step of :meth:`BodyFields.linearized` (m).
+LINEARIZATION_STEP = 2e-3
+#: Points farther than this from their anchor (m) are looked up exactly by the tangent.
+LINEARIZATION_RADIUS = 0.02
 
 
 class BodyFields(torch.nn.Module):
@@ -148,16 +155,44 @@ class BodyFields(torch.nn.Module):
         (p,) = self._fields(points, ("pose_dirs",))
         return p.reshape(*p.shape[:-1], 3, NUM_POSE_FEATURES)
 
+    @property
+    def _all_names(self) -> tuple[str, ...]:
+        if self.has_pose_dirs:
+            return ("weights", "shape_dirs", "pose_dirs")
+        return ("weights", "shape_dirs")
+
     def all_fields(
         self, points: torch.Tensor
     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
         """``weights``, ``shape_dirs`` and ``pose_dirs`` at once (one grid lookup)."""
-        names = (
-            ("weights", "shape_dirs", "pose_dirs")
-            if self.has_pose_dirs
-            else ("weights", "shape_dirs")
-        )
-        values = self._fields(points, names)
+        return self._finish(self._fields(points, self._all_names))
+
+    def linearized(
+        self,
+        anchor: torch.Tensor,
+        step: float = LINEARIZATION_STEP,
+        radius: float = LINEARIZATION_RADIUS,
+    ) -> FieldTangent:
+        """The fields and their spatial derivatives at the points ``anchor`` ``(N, 3)`` (central
+        differences over ``step`` m): a first-order stand-in for :meth:`all_fields` at points
+        within ``radius`` (m) of their anchor, which are looked up exactly farther out (7
+        lookups of N points for a whole chunk of frames instead of one per frame)."""
+        values = [torch.cat(self._fields(anchor, self._all_names), dim=-1)]
+        for axis in range(3):
+            offset = torch.zeros(3, dtype=anchor.dtype, device=anchor.device)
+            offset[axis] = step
+            plus = torch.cat(self._fields(anchor + offset, self._all_names), dim=-1)
+            minus = torch.cat(self._fields(anchor - offset, self._all_names), dim=-1)
+            values.append((plus - minus) / (2.0 * step))
+        sizes = [v.shape[-1] for v in self._fields(anchor[:1], self._all_names)]
+        derivative = torch.stack(values[1:], dim=-1)
+        return FieldTangent(self, anchor, values[0], derivative, sizes, radius)
+
+    def _finish(
+        self, values: list[torch.Tensor]
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
+        """Raw field values (the groups of ``_all_names``) to weights (≥ 0, rows summing to 1),
+        shape and pose blendshapes."""
         w = values[0].clamp_min(0.0)
         w = w / w.sum(-1, keepdim=True).clamp_min(1e-8)
         s = values[1].reshape(*values[1].shape[:-1], 3, NUM_BETAS)
@@ -314,3 +349,36 @@ def load_body_fields(path: str | Path | None = None) -> BodyFields:
     if fields.fields_coarse.channel("weights").shape[1] != NUM_JOINTS:
         raise ValueError(f"{path}: the weights field does not have 24 joints")
     return fields
+
+
+@dataclass
+class FieldTangent:
+    """The body fields to first order about anchor points: ``value + derivative · (x − anchor)``.
+
+    Attributes:
+        fields: the fields it was taken from.
+        anchor: ``(N, 3)`` points (m).
+        value: ``(N, C)`` raw field values there (every group, concatenated).
+        derivative: ``(N, C, 3)`` their derivatives (per m).
+        sizes: channels of each group of ``value``.
+        radius: points farther than this from their anchor (m) are looked up exactly.
+    """
+
+    fields: BodyFields
+    anchor: torch.Tensor
+    value: torch.Tensor
+    derivative: torch.Tensor
+    sizes: list[int]
+    radius: float = LINEARIZATION_RADIUS
+
+    def all_fields(
+        self, points: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
+        """As :meth:`BodyFields.all_fields` for points ``(B, N, 3)``: to first order within
+        ``radius`` of the anchor, exactly beyond."""
+        delta = points - self.anchor
+        raw = self.value + torch.einsum("nck,bnk->bnc", self.derivative, delta)
+        far = delta.norm(dim=-1) > self.radius
+        if bool(far.any()):
+            raw[far] = torch.cat(self.fields._fields(points[far], self.fields._all_names), dim=-1)
+        return self.fields._finish(list(torch.split(raw, self.sizes, dim=-1)))

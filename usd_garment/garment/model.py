@@ -17,7 +17,7 @@ import torch
 from usd_garment.body.joints import NUM_JOINTS
 from usd_garment.body.lbs import batch_rigid_transform, batch_rodrigues, pose_features, skin
 from usd_garment.body.model import BodyModel
-from usd_garment.fields.body_fields import BodyFields
+from usd_garment.fields.body_fields import BodyFields, FieldTangent
 
 
 @dataclass
@@ -85,12 +85,17 @@ class GarmentModel(torch.nn.Module):
             transforms[..., :3, 3] += trans[:, None]
         return Articulation(betas, pose_features(rot_mats), transforms)
 
-    def pose(self, x: torch.Tensor, art: Articulation) -> GarmentOutput:
+    def pose(
+        self, x: torch.Tensor, art: Articulation, tangent: FieldTangent | None = None
+    ) -> GarmentOutput:
         """Eqs. 9 then 8 for canonical points ``x`` ``(B, N, 3)`` and a precomputed articulation.
 
         The pose blendshape term is present only when the fields have pose blendshapes.
+        ``tangent``: the fields to first order about points near ``x`` (inference: one set of
+        lookups per chunk of frames instead of one per frame); None: looked up at ``x``.
         """
-        weights, shape_dirs, pose_dirs = self.fields.all_fields(x)  # W̃(X), B̃s(X), B̃p(X)
+        source = tangent if tangent is not None else self.fields
+        weights, shape_dirs, pose_dirs = source.all_fields(x)  # W̃(X), B̃s(X), B̃p(X)
         t_g = x + torch.einsum("bk,bnck->bnc", art.betas, shape_dirs)  # Eq. 9
         if pose_dirs is not None:
             t_g = t_g + torch.einsum("bp,bncp->bnc", art.pose_features, pose_dirs)

@@ -68,12 +68,22 @@ class LearnedMethod:
         model: a model directory (see :mod:`learned_model`), or None for the shipped default
             of the template's garment.
         fields: the body's diffused fields for M_G; the default body's by default.
+        exact_fields: look the fields up at every frame's canonical garment; by default they
+            are taken to first order about each chunk's mean canonical garment (exactly only
+            for vertices more than 2 cm from it): several times faster, within 0.2 mm on
+            average of the exact M_G (:meth:`BodyFields.linearized`).
     """
 
     name = "learned"
 
-    def __init__(self, model: str | Path | None = None, fields: BodyFields | None = None) -> None:
+    def __init__(
+        self,
+        model: str | Path | None = None,
+        fields: BodyFields | None = None,
+        exact_fields: bool = False,
+    ) -> None:
         self.model_path = Path(model) if model is not None else None
+        self.exact_fields = exact_fields
         self._model: LearnedModel | None = None
         self._fields = fields
 
@@ -83,7 +93,10 @@ class LearnedMethod:
 
     @property
     def settings(self) -> dict[str, Any]:
-        out: dict[str, Any] = {"model": str(self.model_path) if self.model_path else "shipped"}
+        out: dict[str, Any] = {
+            "model": str(self.model_path) if self.model_path else "shipped",
+            "fields": "exact" if self.exact_fields else "linearized per chunk",
+        }
         if self._model is not None:
             out.update(
                 garment=self._model.garment,
@@ -166,5 +179,7 @@ class LearnedMethod:
             e = min(s + chunk, t_frames)
             with torch.no_grad():
                 x = model.vae.decode(z[s:e])
-                points = garment_model(x, betas, pose[s:e], trans[s:e]).vertices.numpy()
+                art = garment_model.articulation(betas, pose[s:e], trans[s:e])
+                tangent = self._fields.linearized(x.mean(dim=0)) if not self.exact_fields else None
+                points = garment_model.pose(x, art, tangent).vertices.numpy()
             yield points
