@@ -1,8 +1,10 @@
-"""Benchmark of the stage processor: ``dress --method lbs`` on a 1,000-frame procedural animation,
-in-process and once through the CLI, with the share of time in read, compute and write; and the
-``lbs+postprocess`` baseline on a slice of the same animation for comparison.
+"""Benchmark of the stage processor on a 1,000-frame 30 fps procedural animation: ``dress`` with
+the default method (the learned one where a model ships) and with ``lbs``, in-process (read,
+compute, write) and once through the CLI (with interpreter start); ``lbs+postprocess`` and the
+physics simulation on slices of the same animation; the ratios between them.
 
-Run: ``python benchmarks/bench_dress.py [--frames 1000] [--postprocess-frames 100]``
+Run: ``python benchmarks/bench_dress.py [--frames 1000] [--postprocess-frames 100]
+[--simulation-frames 30]``
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ import torch
 
 from usd_garment.body import load_body_model
 from usd_garment.dress import dress
+from usd_garment.methods.learned import default_method
 from usd_garment.motion.amass import load_amass
 from usd_garment.usd.body_layer import write_body_layer
 
@@ -52,6 +55,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=1000)
     parser.add_argument("--postprocess-frames", type=int, default=100)
+    parser.add_argument("--simulation-frames", type=int, default=30)
     args = parser.parse_args()
     print(f"torch {torch.__version__}, {torch.get_num_threads()} threads")
     with tempfile.TemporaryDirectory() as tmp:
@@ -63,29 +67,32 @@ def main() -> None:
         write_body_layer(body_usd, load_amass(npz, body), body)
         print(f"built {args.frames}-frame body layer in {time.perf_counter() - start:.1f} s")
 
-        lbs = dress(body_usd, folder / "lbs.usdc", method="lbs").to_json()
-        lbs_fps = report("lbs (in-process)", lbs)
-
+        default = default_method("tshirt", "high")
+        runs = {}
+        for method in dict.fromkeys((default, "lbs")):
+            runs[method] = dress(body_usd, folder / f"{method}.usdc", method=method).to_json()
+            report(f"{method} (in-process)", runs[method])
         start = time.perf_counter()
         cli = subprocess.run(
             [str(Path(sys.executable).with_name("usd-garment")), "dress", str(body_usd),
-             "-o", str(folder / "cli.usdc"), "--method", "lbs", "--json"],
+             "-o", str(folder / "cli.usdc"), "--json"],
             capture_output=True, text=True, check=True,
         )  # fmt: skip
         wall = time.perf_counter() - start
-        cli_summary = json.loads(cli.stdout)
-        report("lbs (CLI)", cli_summary)
-        print(f"lbs (CLI) wall time incl. interpreter start: {wall:.2f} s, "
+        report(f"{default} (CLI, default method)", json.loads(cli.stdout))
+        print(f"{default} (CLI) wall time incl. interpreter start: {wall:.2f} s, "
               f"{args.frames / wall:.1f} frames/s")  # fmt: skip
 
-        n = min(args.postprocess_frames, args.frames)
-        pp = dress(body_usd, folder / "pp.usdc", method="lbs+postprocess", frames=(0, n)).to_json()
-        pp_fps = report(f"lbs+postprocess (in-process, first {n} frames)", pp)
-        compute_ratio = (pp["seconds"]["compute"] / pp["frames"]) / (
-            lbs["seconds"]["compute"] / lbs["frames"]
-        )
-        print(f"baseline ratio: lbs is {lbs_fps / pp_fps:.1f}x faster end to end than "
-              f"lbs+postprocess; compute per frame {compute_ratio:.1f}x")  # fmt: skip
+        slices = {"lbs+postprocess": args.postprocess_frames, "simulation": args.simulation_frames}
+        for method, count in slices.items():
+            n = min(count, args.frames)
+            runs[method] = dress(body_usd, folder / f"{method}.usdc", method=method,
+                                 frames=(0, n)).to_json()  # fmt: skip
+            report(f"{method} (in-process, first {n} frames)", runs[method])
+        fps = {m: r["frames"] / sum(r["seconds"].values()) for m, r in runs.items()}
+        for method in ("lbs+postprocess", "simulation"):
+            print(f"ratio: {default} is {fps[default] / fps[method]:.1f}x faster end to end than "
+                  f"{method}")  # fmt: skip
 
 
 if __name__ == "__main__":
