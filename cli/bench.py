@@ -11,7 +11,7 @@ from tqdm import tqdm
 
 from usd_garment.body.io import load_body_model
 from usd_garment.cli.errors import user_errors
-from usd_garment.eval.bench import BenchInput, BenchMethod, chart_points, run_bench, write_report
+from usd_garment.eval.bench import BenchInput, BenchMethod, chart_table, run_bench, write_report
 from usd_garment.eval.bench_plots import plot_chart, plot_collision_curves
 from usd_garment.eval.stress import LONG_FRAMES, write_stress_inputs
 from usd_garment.garment.template import GARMENT_NAMES, LODS
@@ -211,14 +211,7 @@ def bench(
     write_report(rows, output, {"wall_seconds": wall, "inputs": [c.name for c in cases]})
     plot_chart(rows, output / "chart.png", f"{garment}: {len(cases)} input(s), {wall:.0f} s")
     plot_collision_curves(rows, output / "collisions.png")
-    click.echo(f"{'method':<28} {'lod':<7} {'frames/s':>9} {'inside forced %':>16} "
-               f"{'elsewhere %':>12} {'error mm':>9} failures")  # fmt: skip
-    for p in chart_points(rows):
-        click.echo(
-            f"{p.label:<28} {p.lod:<7} {p.frames_per_second:>9.1f} "
-            f"{100 * p.inside_forced_share:>16.4f} {100 * p.inside_elsewhere_share:>12.4f} "
-            f"{p.reference_mm:>9.2f} {p.failures}"
-        )
+    click.echo(chart_table(rows))
     for r in rows:
         if r.error:
             click.echo(f"failed: {r.label} ({r.lod}) on {r.input}: {r.error}")

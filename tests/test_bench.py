@@ -14,7 +14,14 @@ from click.testing import CliRunner
 
 from usd_garment.body.model import BodyModel
 from usd_garment.cli.main import main
-from usd_garment.eval.bench import BenchInput, BenchMethod, pareto_front, run_bench
+from usd_garment.eval.bench import (
+    BenchInput,
+    BenchMethod,
+    chart_table,
+    load_report,
+    pareto_front,
+    run_bench,
+)
 from usd_garment.motion.procedural import make_motion
 from usd_garment.usd.body_layer import write_body_layer
 
@@ -67,6 +74,12 @@ def test_bench_command_writes_table_chart_and_curves(tmp_path: Path, walk: Path)
     payload = json.loads((report / "report.json").read_text())
     assert len(payload["chart"]) == 5 and payload["wall_seconds"] > 0
     assert all(len(r["inside_elsewhere"]) == 6 for r in payload["rows"])
+    again = load_report(report / "report.json")  # the chart can be redrawn from the report
+    assert [(r.label, r.lod) for r in again] == [(r["label"], r["lod"]) for r in payload["rows"]]
+    table = chart_table(again).splitlines()
+    assert len(table) == 6 and table[1].split()[0] == "simulation"
+    with pytest.raises(ValueError, match="not a bench report"):
+        load_report(report / "report.csv")
 
 
 def test_a_failing_method_is_a_row_not_the_end(tmp_path: Path, walk: Path) -> None:

@@ -192,7 +192,9 @@ class ChartPoint:
     frames_per_second: float
     inside_elsewhere_share: float
     inside_forced_share: float
+    within_1mm_share: float
     reference_mm: float
+    acceleration: float
     failures: int
 
 
@@ -220,11 +222,29 @@ def chart_points(rows: Sequence[BenchRow]) -> list[ChartPoint]:
                 frames_per_second=frames / seconds if seconds > 0 else float("nan"),
                 inside_elsewhere_share=mean("inside_elsewhere_share"),
                 inside_forced_share=mean("inside_forced_share"),
+                within_1mm_share=mean("within_1mm_share"),
                 reference_mm=mean("reference_mm"),
+                acceleration=mean("acceleration"),
                 failures=sum(1 for r in rows if (r.label, r.lod) == (label, lod) and r.error),
             )
         )
     return points
+
+
+def chart_table(rows: Sequence[BenchRow]) -> str:
+    """The chart points as a plain-text table (the paper's Table 1 with speed and error):
+    shares in % of vertices, error in mm, jitter as mean vertex acceleration in m/s²."""
+    head = (f"{'method':<30} {'lod':<6} {'frames':>6} {'frames/s':>9} {'forced %':>9} "
+            f"{'elsewhere %':>11} {'<1 mm %':>8} {'error mm':>8} {'accel':>6} failed")  # fmt: skip
+    lines = [head]
+    for p in chart_points(rows):
+        lines.append(
+            f"{p.label:<30} {p.lod:<6} {p.frames:>6} {p.frames_per_second:>9.1f} "
+            f"{100 * p.inside_forced_share:>9.4f} {100 * p.inside_elsewhere_share:>11.4f} "
+            f"{100 * p.within_1mm_share:>8.3f} {p.reference_mm:>8.2f} {p.acceleration:>6.2f} "
+            f"{p.failures}"
+        )
+    return "\n".join(lines)
 
 
 def pareto_front(speed: Sequence[float], cost: Sequence[float]) -> list[int]:
@@ -275,6 +295,24 @@ def write_report(
                  *(_cell(r.summary.get(k)) for k in CSV_SUMMARY), r.error]
             )  # fmt: skip
     return json_path, csv_path
+
+
+def load_report(path: str | Path) -> list[BenchRow]:
+    """The rows of a ``report.json`` that :func:`write_report` wrote (None read back as NaN).
+
+    Raises:
+        ValueError: not a bench report.
+    """
+    try:
+        payload = json.loads(Path(path).read_text(encoding="utf-8"))
+        rows = [BenchRow(**row) for row in payload["rows"]]
+    except (OSError, KeyError, TypeError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{path}: not a bench report ({exc})") from exc
+    for row in rows:
+        if row.frames_per_second is None:
+            row.frames_per_second = float("nan")
+        row.summary = {k: (float("nan") if v is None else v) for k, v in row.summary.items()}
+    return rows
 
 
 def _cell(value: Any) -> str:
