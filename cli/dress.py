@@ -23,6 +23,9 @@ from usd_garment.garment.template import GARMENT_NAMES
 from usd_garment.methods import available_methods
 from usd_garment.methods.learned import LearnedMethod, default_method
 
+#: The level of detail of each --quality.
+QUALITY_LODS = {"draft": "low", "final": "high"}
+
 
 @click.command("dress")
 @click.argument("input_path", metavar="INPUT", type=click.Path(path_type=Path))
@@ -63,6 +66,13 @@ from usd_garment.methods.learned import LearnedMethod, default_method
     help="Also write a layer that sublayers the garment layer and the input.",
 )
 @click.option(
+    "--quality",
+    type=click.Choice(tuple(QUALITY_LODS)),
+    default=None,
+    help="Pick the level of detail for the use: draft (low: fast previews and layout) or final "
+    "(high); instead of --lod.",
+)
+@click.option(
     "--proxy",
     "proxy_lod",
     type=click.Choice(("medium", "low")),
@@ -83,11 +93,17 @@ def dress(
     skeleton: str | None,
     betas: str | None,
     root_layer: Path | None,
+    quality: str | None,
     proxy_lod: str | None,
     as_json: bool,
 ) -> None:
     """Dress the animated SMPL body of INPUT; write the garment layer to OUTPUT."""
     frame_range, beta_values = parse_frames(frames), parse_betas(betas)
+    if quality is not None:
+        source = click.get_current_context().get_parameter_source("lod")
+        if source is not click.core.ParameterSource.DEFAULT:
+            raise click.BadParameter("give --quality or --lod, not both", param_hint="--quality")
+        lod = QUALITY_LODS[quality]
     if method is None:
         method = LearnedMethod.name if model is not None else default_method(garment, lod)
     if model is not None and method != LearnedMethod.name:

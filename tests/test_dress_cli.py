@@ -14,6 +14,7 @@ from click.testing import CliRunner
 from tests.dress_helpers import random_motion
 from usd_garment.body.model import BodyModel
 from usd_garment.cli.main import main
+from usd_garment.garment.library import load_template
 from usd_garment.methods.learned import default_method
 from usd_garment.usd.body_layer import write_body_layer
 
@@ -145,3 +146,14 @@ def test_missing_input(tmp_path: Path) -> None:
 def test_eval_bad_layer(body_layer: Path, tmp_path: Path) -> None:
     message = _assert_clean_failure(["eval", body_layer, "--body", body_layer], tmp_path, None)
     assert "garment" in message
+
+
+def test_quality_picks_the_level_of_detail(body_layer: Path, tmp_path: Path) -> None:
+    out = tmp_path / "draft.usdc"
+    result = CliRunner().invoke(main, ["dress", str(body_layer), "-o", str(out), "--quality",
+                                       "draft", "--json"])  # fmt: skip
+    assert result.exit_code == 0, result.output
+    assert json.loads(result.output)["vertices"] == len(load_template("tshirt", "low").vertices)
+    both = CliRunner().invoke(main, ["dress", str(body_layer), "-o", str(tmp_path / "x.usdc"),
+                                     "--quality", "final", "--lod", "low"])  # fmt: skip
+    assert both.exit_code == 2 and "give --quality or --lod, not both" in both.output
