@@ -1,6 +1,6 @@
-"""Preview of the default body with the T-shirt template: in the rest T-pose, and in an
-AMASS-like pose (left arm raised, right knee bent, a step) dressed by the ``lbs+postprocess``
-baseline. Front and three-quarter views.
+"""Preview of what the README's first command makes: ``examples/walk.usda`` dressed by ``dress``
+with its default method (the shipped learned T-shirt), read back from the written garment layer
+and drawn with the posed body at three frames, front and three-quarter views.
 
 Run: ``python examples/render_preview.py [-o docs/preview.png]``.
 """
@@ -8,35 +8,24 @@ Run: ``python examples/render_preview.py [-o docs/preview.png]``.
 from __future__ import annotations
 
 import argparse
+import tempfile
 from pathlib import Path
 
 import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
-import numpy as np
-import torch
 
-from usd_garment.body import SMPL_JOINT_NAMES, load_body_model
+from usd_garment.body import load_body_model
+from usd_garment.dress import dress
+from usd_garment.eval.evaluate import posed_body_vertices
 from usd_garment.eval.render import CLOTH, SKIN, draw_meshes
-from usd_garment.garment.library import load_template
-from usd_garment.methods import get_method
-from usd_garment.motion.sequence import SmplMotion
+from usd_garment.methods.learned import default_method
+from usd_garment.usd.garment_read import read_garment_layer
+from usd_garment.usd.read import read_smpl_motion
 
-J = {name: i for i, name in enumerate(SMPL_JOINT_NAMES)}
-
-
-def amass_like_pose() -> np.ndarray:
-    """``(24, 3)`` axis-angles: left arm raised, right knee bent, left hip forward, elbows bent."""
-    pose = np.zeros((24, 3), dtype=np.float32)
-    pose[J["left_shoulder"]] = [0.0, 0.0, 1.1]
-    pose[J["right_shoulder"]] = [0.0, 0.0, 1.0]
-    pose[J["right_elbow"]] = [0.0, 1.2, 0.0]
-    pose[J["right_hip"]] = [-0.3, 0.0, 0.0]
-    pose[J["right_knee"]] = [1.2, 0.0, 0.0]
-    pose[J["left_hip"]] = [-0.4, 0.0, 0.0]
-    pose[J["spine2"]] = [0.15, 0.2, 0.0]
-    return pose
+EXAMPLE = Path(__file__).resolve().parent / "walk.usda"
+FRAMES = (20, 60, 100)
 
 
 def main() -> None:
@@ -44,30 +33,30 @@ def main() -> None:
     parser.add_argument("-o", "--output", type=Path, default=Path("docs/preview.png"))
     args = parser.parse_args()
     body = load_body_model()
-    template = load_template("tshirt", "high")
-    pose = np.stack([np.zeros((24, 3), np.float32), amass_like_pose()])
-    motion = SmplMotion(np.zeros(10, np.float32), pose, np.zeros((2, 3), np.float32), 30.0)
-    garment = get_method("lbs+postprocess").predict(motion, body, template)
-    with torch.no_grad():
-        posed = body(torch.zeros(10), torch.as_tensor(pose)).vertices.numpy()
+    method = default_method("tshirt", "high")
+    with tempfile.TemporaryDirectory() as tmp:
+        result = dress(EXAMPLE, Path(tmp) / "walk_tshirt.usdc", method=method)
+        garment, garment_faces, _ = read_garment_layer(Path(tmp) / "walk_tshirt.usdc")
+    motion, _ = read_smpl_motion(EXAMPLE, body)
+    posed = posed_body_vertices(body, motion)
     faces = body.faces.numpy()
-    fig, axes = plt.subplots(1, 4, figsize=(14, 5))
-    titles = ("T-pose, front", "T-pose, 3/4", "AMASS-like pose, front", "AMASS-like pose, 3/4")
-    for ax, (frame, view), title in zip(
-        axes, ((0, 0.0), (0, 40.0), (1, 0.0), (1, 40.0)), titles, strict=True
-    ):
-        draw_meshes(ax, [(posed[frame], faces, SKIN), (garment[frame], template.faces, CLOTH)],
-                    view)  # fmt: skip
-        ax.set_xlim(-1.0, 1.0)
-        ax.set_ylim(-1.2, 0.7)
-        ax.set_aspect("equal")
-        ax.set_axis_off()
-        ax.set_title(title, fontsize=10)
-    fig.suptitle(f"default body ({body.name}) with the T-shirt template ({len(template.vertices)}"
-                 " vertices), posed by lbs+postprocess")  # fmt: skip
+    fig, axes = plt.subplots(2, len(FRAMES), figsize=(4 * len(FRAMES), 9))
+    for row, view in enumerate((0.0, 40.0)):
+        for ax, frame in zip(axes[row], FRAMES, strict=True):
+            centre = posed[frame].mean(axis=0)
+            draw_meshes(ax, [(posed[frame] - centre, faces, SKIN),
+                             (garment[frame] - centre, garment_faces, CLOTH)], view)  # fmt: skip
+            ax.set_xlim(-0.9, 0.9)
+            ax.set_ylim(-1.0, 0.9)
+            ax.set_aspect("equal")
+            ax.set_axis_off()
+            ax.set_title(f"frame {frame}, {'front' if view == 0 else '3/4'}", fontsize=10)
+    fps = result.frames / sum(result.seconds.values())
+    fig.suptitle(f"examples/walk.usda dressed by 'usd-garment dress' ({result.method}, "
+                 f"{result.vertices} vertices, {fps:.0f} frames/s end to end)")  # fmt: skip
     fig.tight_layout()
     args.output.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(args.output, dpi=100)
+    fig.savefig(args.output, dpi=90)
 
 
 if __name__ == "__main__":
