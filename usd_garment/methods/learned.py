@@ -28,8 +28,10 @@ from usd_garment.regressor.descriptor import MODEL_FPS, describe_motion
 
 #: Where the shipped default model of each garment lives.
 SHIPPED_MODELS = Path(__file__).resolve().parent.parent / "data" / "models"
-#: Frames decoded and posed at once (bounds memory: ~N·(3 + 24 + 30) floats per frame).
+#: Frames decoded at once, sharing one first-order expansion of the body fields.
 FRAMES_PER_CHUNK = 256
+#: Frames posed at once within a chunk (bounds memory: ~N·(3 + 24 + 30) floats per frame).
+POSE_FRAMES = 64
 
 
 def shipped_model(garment: str, lod: str | None = None) -> Path | None:
@@ -179,7 +181,11 @@ class LearnedMethod:
             e = min(s + chunk, t_frames)
             with torch.no_grad():
                 x = model.vae.decode(z[s:e])
-                art = garment_model.articulation(betas, pose[s:e], trans[s:e])
                 tangent = self._fields.linearized(x.mean(dim=0)) if not self.exact_fields else None
-                points = garment_model.pose(x, art, tangent).vertices.numpy()
+                parts = []
+                for a in range(s, e, POSE_FRAMES):  # bounds the (t, N, channels) temporaries
+                    b = min(a + POSE_FRAMES, e)
+                    art = garment_model.articulation(betas, pose[a:b], trans[a:b])
+                    parts.append(garment_model.pose(x[a - s : b - s], art, tangent).vertices)
+                points = torch.cat(parts).numpy()
             yield points
