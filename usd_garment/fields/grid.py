@@ -11,8 +11,9 @@ Shapes: M query points, C channels; positions in metres.
 
 from __future__ import annotations
 
+import numpy as np
 import torch
-import torch.nn.functional as F
+from scipy import ndimage
 
 
 def _cell_and_weights(
@@ -118,10 +119,13 @@ class SparseGrid(torch.nn.Module):
         index[flat] = torch.arange(count)
         self.register_buffer("origin", torch.as_tensor(origin, dtype=torch.float32))
         self.register_buffer("index", index)
-        # 1 at masked nodes whose 26 neighbours are all masked, else 0.
-        outside = F.pad((~mask.bool()).float()[None, None], (1,) * 6, value=1.0)
-        eroded = F.max_pool3d(outside, 3, stride=1)[0, 0] == 0
-        self.register_buffer("inner", eroded.reshape(-1)[flat].float()[:, None])
+        # 1 at masked nodes whose 26 neighbours are all masked (nodes outside the grid are not),
+        # else 0.
+        eroded = ndimage.binary_erosion(
+            mask.bool().cpu().numpy(), structure=np.ones((3, 3, 3), dtype=bool), border_value=0
+        )
+        inner = torch.from_numpy(eroded.reshape(-1))[flat.cpu()].float()[:, None]
+        self.register_buffer("inner", inner)
         _register_channels(self, channels)
 
     def channel(self, name: str) -> torch.Tensor:
