@@ -136,7 +136,6 @@ def dress(
 
     chunks = predict_chunks(garment_method, motion, body, template, frames_per_chunk, progress)
     seconds["compute"] = seconds["write"] = 0.0
-    done = 0
     writer: GarmentLayerWriter | None = None
     with ExitStack() as stack:
         while True:
@@ -160,9 +159,6 @@ def dress(
                 )  # fmt: skip
             writer.add([points] if proxy is None else [points, carry(points, weights)])
             seconds["write"] += time.perf_counter() - start
-            done += len(points)
-            if progress is not None:
-                progress(done)
         start = time.perf_counter()
     seconds["write"] += time.perf_counter() - start  # the files renamed into place
     assert writer is not None

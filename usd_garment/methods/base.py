@@ -72,27 +72,22 @@ def predict_chunks(
     progress: Progress | None = None,
 ) -> Iterator[np.ndarray]:
     """The posed garment of ``method`` in consecutive chunks ``(t ≤ chunk, N, 3)`` float32
-    (canonical frame, m), frames in order.
+    (canonical frame, m), frames in order; ``progress`` gets the frames computed so far.
 
     Methods that pose frames chunk by chunk (``predict_stream(motion, body, template, chunk)``,
-    e.g. skinning and the learned method) hold one chunk at a time; the others (the simulation)
-    compute the whole sequence with ``predict`` first, reporting to ``progress`` as they go.
+    e.g. skinning and the learned method) hold one chunk at a time and report after each; the
+    others (the simulation) compute the whole sequence with ``predict`` first, reporting as
+    they go.
     """
     stream = getattr(method, "predict_stream", None)
-    if stream is not None:
-        yield from stream(motion, body, template, chunk)
+    if stream is None:
+        points = method.predict(motion, body, template, progress)
+        for s in range(0, len(points), chunk):
+            yield points[s : s + chunk]
         return
-    points = method.predict(motion, body, template, progress)
-    for s in range(0, len(points), chunk):
-        yield points[s : s + chunk]
-
-
-def gather_chunks(chunks: Iterator[np.ndarray], progress: Progress | None = None) -> np.ndarray:
-    """The frames of ``chunks`` in one ``(T, N, 3)`` array; ``progress`` after each chunk."""
-    parts, done = [], 0
-    for part in chunks:
-        parts.append(part)
+    done = 0
+    for part in stream(motion, body, template, chunk):
         done += len(part)
         if progress is not None:
             progress(done)
-    return np.concatenate(parts)
+        yield part

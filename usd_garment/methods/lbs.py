@@ -13,7 +13,7 @@ from usd_garment.body.lbs import blend_shapes, skin
 from usd_garment.body.model import BodyModel
 from usd_garment.eval.body_distance import BodySurface
 from usd_garment.garment.template import GarmentTemplate
-from usd_garment.methods.base import Progress, gather_chunks
+from usd_garment.methods.base import Progress, predict_chunks
 from usd_garment.methods.postprocess import PUSH_OUT_EPS, PUSH_OUT_PASSES, push_out
 from usd_garment.motion.sequence import SmplMotion
 
@@ -43,7 +43,8 @@ class LbsMethod:
         progress: Progress | None = None,
     ) -> np.ndarray:
         """Posed garment points ``(T, N, 3)`` float32, canonical frame (m)."""
-        return gather_chunks(self.predict_stream(motion, body, template), progress)
+        chunks = predict_chunks(self, motion, body, template, FRAMES_PER_CHUNK, progress)
+        return np.concatenate(list(chunks))
 
     def predict_stream(
         self,

@@ -21,7 +21,7 @@ from usd_garment.body.model import BodyModel
 from usd_garment.fields.body_fields import BodyFields, load_body_fields
 from usd_garment.garment.model import GarmentModel
 from usd_garment.garment.template import GarmentTemplate
-from usd_garment.methods.base import Progress, gather_chunks
+from usd_garment.methods.base import Progress, predict_chunks
 from usd_garment.methods.learned_model import LearnedModel, ModelError, load_learned_model
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.regressor.descriptor import MODEL_FPS, describe_motion
@@ -144,7 +144,8 @@ class LearnedMethod:
         Raises:
             ModelError: no usable model, or one trained on another template.
         """
-        return gather_chunks(self.predict_stream(motion, body, template), progress)
+        chunks = predict_chunks(self, motion, body, template, FRAMES_PER_CHUNK, progress)
+        return np.concatenate(list(chunks))
 
     def predict_stream(
         self,
