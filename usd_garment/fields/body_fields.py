@@ -177,14 +177,15 @@ class BodyFields(torch.nn.Module):
         differences over ``step`` m): a first-order stand-in for :meth:`all_fields` at points
         within ``radius`` (m) of their anchor, which are looked up exactly farther out (7
         lookups of N points for a whole chunk of frames instead of one per frame)."""
-        values = [torch.cat(self._fields(anchor, self._all_names), dim=-1)]
+        groups = self._fields(anchor, self._all_names)
+        sizes = [g.shape[-1] for g in groups]
+        values = [torch.cat(groups, dim=-1)]
         for axis in range(3):
             offset = torch.zeros(3, dtype=anchor.dtype, device=anchor.device)
             offset[axis] = step
             plus = torch.cat(self._fields(anchor + offset, self._all_names), dim=-1)
             minus = torch.cat(self._fields(anchor - offset, self._all_names), dim=-1)
             values.append((plus - minus) / (2.0 * step))
-        sizes = [v.shape[-1] for v in self._fields(anchor[:1], self._all_names)]
         derivative = torch.stack(values[1:], dim=-1)
         return FieldTangent(self, anchor, values[0], derivative, sizes, radius)
 
