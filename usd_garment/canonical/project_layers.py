@@ -172,6 +172,8 @@ def project_layers(
         body_layers = body_layers if len(body_layers) == 1 else [body_layers[k] for k in new]
         splits = [splits[k] for k in new]
     body = load_body_model(body_model)
+    if kept is not None and kept.metadata.get("body_model") != body.name:
+        raise ValueError(f"{output}: made for body '{kept.metadata.get('body_model')}'")
     body_fields = load_body_fields(fields)
     if body_fields.body_name != body.name:
         raise ValueError(
@@ -242,8 +244,6 @@ def project_layers(
         },
     )
     if kept is not None:
-        if kept.metadata.get("body_model") != body.name:
-            raise ValueError(f"{output}: made for body '{kept.metadata.get('body_model')}'")
         for key in ("seconds", "wall_seconds"):
             data.metadata[key] += float(kept.metadata.get(key, 0.0))
         data = concat_canonical_sets(kept, data)
