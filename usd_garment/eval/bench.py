@@ -18,6 +18,7 @@ from usd_garment.atomic import atomic_output
 from usd_garment.body.io import load_body_model
 from usd_garment.dress import dress
 from usd_garment.eval.evaluate import evaluate_layer
+from usd_garment.eval.metrics import GarmentMetrics
 from usd_garment.methods import GarmentMethod, get_method
 from usd_garment.methods.learned import LearnedMethod
 from usd_garment.usd.read import read_smpl_motion
@@ -126,10 +127,10 @@ def run_bench(
     """
     layers = Path(folder) / "layers"
     layers.mkdir(parents=True, exist_ok=True)
-    body = load_body_model()
+    body = load_body_model() if any(m.frames is not None for m in methods) else None
     rows = []
     for case in inputs:
-        length = read_smpl_motion(case.body, body)[0].num_frames
+        length = read_smpl_motion(case.body, body)[0].num_frames if body is not None else 0
         if case.reference is not None:
             rows.append(_reference_row(case, garment))
             if on_row is not None:
@@ -146,14 +147,11 @@ def run_bench(
                     )  # fmt: skip
                     metrics, _ = evaluate_layer(out, case.body, case.reference, garment)
                 except Exception as exc:  # a failing method is a result here, not the end
-                    row.error = f"{type(exc).__name__}: {(str(exc) or '-').splitlines()[0]}"
+                    row.error = _failure(exc)
                 else:
-                    row.frames, row.vertices = result.frames, result.vertices
-                    row.seconds = result.seconds
+                    row.vertices, row.seconds = result.vertices, result.seconds
                     row.frames_per_second = result.frames / max(sum(result.seconds.values()), 1e-9)
-                    row.summary = metrics.summary()
-                    row.inside_elsewhere = [float(v) for v in metrics.inside_elsewhere_share]
-                    row.inside_forced = [float(v) for v in metrics.inside_forced_share]
+                    _set_metrics(row, metrics, result.frames)
                 rows.append(row)
                 if on_row is not None:
                     on_row(row)
@@ -172,13 +170,23 @@ def _reference_row(case: BenchInput, garment: str) -> BenchRow:
     try:
         metrics, codes = evaluate_layer(case.reference, case.body, None, garment)
     except Exception as exc:  # an unreadable reference is reported like a failed method
-        row.error = f"{type(exc).__name__}: {(str(exc) or '-').splitlines()[0]}"
+        row.error = _failure(exc)
         return row
-    row.frames = len(codes)
+    _set_metrics(row, metrics, len(codes))
+    return row
+
+
+def _failure(exc: Exception) -> str:
+    """The one-line ``error`` of a row: the exception's type and first line."""
+    return f"{type(exc).__name__}: {(str(exc) or '-').splitlines()[0]}"
+
+
+def _set_metrics(row: BenchRow, metrics: GarmentMetrics, frames: int) -> None:
+    """Fill ``row``'s frame count, summary and per-frame collision curves from ``metrics``."""
+    row.frames = frames
     row.summary = metrics.summary()
     row.inside_elsewhere = [float(v) for v in metrics.inside_elsewhere_share]
     row.inside_forced = [float(v) for v in metrics.inside_forced_share]
-    return row
 
 
 @dataclass
