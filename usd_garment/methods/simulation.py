@@ -173,9 +173,10 @@ class SimulationMethod:
         """Args: solver steps and iterations per frame, the fabric (cotton by default), lead-in
         and settle frames, the most substeps a retried frame may use, the start shape (default:
         the draped template), whether the first bad frame fails the sequence (``strict``), the
-        frame checks' limits (``CheckLimits()`` by default), the most consecutive bad frames
-        kept when not strict, the contact settings (``ContactSettings()`` by default) and
-        whether the body is one collider per part (``collider_parts``) or a single one."""
+        frame checks' limits (by default ``CheckLimits.for_garment`` of the template), the most
+        consecutive bad frames kept when not strict, the contact settings
+        (``ContactSettings()`` by default) and whether the body is one collider per part
+        (``collider_parts``) or a single one."""
         if substeps < 1 or iterations < 1 or lead_in < 0 or settle < 0 or max_bad_run < 0:
             raise ValueError(
                 "substeps and iterations must be >= 1, lead-in, settle and max_bad_run >= 0"
@@ -190,7 +191,8 @@ class SimulationMethod:
         self.max_substeps = max_substeps
         self.start = start
         self.strict = strict
-        self.limits = limits or CheckLimits()
+        self.limits = limits
+        self.garment_limits = CheckLimits()  # the last predicted garment's, when not given
         self.max_bad_run = max_bad_run
         self.contact = contact or ContactSettings()
         self.split_colliders = split_colliders
@@ -218,7 +220,7 @@ class SimulationMethod:
             "colliders": "trunk, " + ", ".join(COLLIDER_PARTS)
             if self.split_colliders
             else "whole body",
-            "limits": asdict(self.limits),
+            "limits": asdict(self.limits or self.garment_limits),
             "strict": self.strict,
             "max_bad_run": self.max_bad_run,
         }
@@ -252,6 +254,7 @@ class SimulationMethod:
             self.start_source = "draped on the fly"
         if start.vertices.shape != template.vertices.shape:
             raise ValueError("the start shape and the template have different vertex counts")
+        self.garment_limits = CheckLimits.for_garment(template.name)
         rest, lead = lead_in_bodies(body, motion, self.lead_in)
         frames = _posed(body, motion.betas, motion.pose, motion.trans)
         warmup = self.lead_in + self.settle
@@ -279,7 +282,7 @@ class SimulationMethod:
             fps=motion.fps,
             max_substeps=self.max_substeps,
             contact=self.contact,
-            limits=self.limits,
+            limits=self.limits or self.garment_limits,
             strict=self.strict,
             max_bad_run=self.max_bad_run,
             progress=report,

@@ -31,7 +31,8 @@ class CheckLimits:
             closer than two contact radii but not intersecting it, reads 0.1-0.4 % here).
         max_distance: largest tolerated distance of any vertex from the body surface (m): a
             vertex farther than this means the garment fell off (fatal even when bad frames
-            are kept).
+            are kept). Per garment by :meth:`for_garment`: a skirt's hem swings free of the
+            legs.
         max_stretch: largest tolerated p99 of current / rest edge length.
     """
 
@@ -39,6 +40,19 @@ class CheckLimits:
     max_inside_share: float = 0.005
     max_distance: float = 0.15
     max_stretch: float = 1.3
+
+    @classmethod
+    def for_garment(cls, garment: str) -> CheckLimits:
+        """The default limits for ``garment`` (a name of ``GARMENT_NAMES``): the T-shirt's
+        fell-off distance is 15 cm; a dress's hem hangs up to ~30 cm from the thighs in a squat
+        or a stride, so it gets :data:`SKIRT_MAX_DISTANCE`."""
+        if garment == "dress":
+            return cls(max_distance=SKIRT_MAX_DISTANCE)
+        return cls()
+
+
+#: Fell-off distance of garments with a skirt (m): beyond the hem's free swing.
+SKIRT_MAX_DISTANCE = 0.4
 
 
 @dataclass(frozen=True)
