@@ -16,13 +16,13 @@ from usd_garment.eval.bench_plots import plot_chart, plot_collision_curves
 from usd_garment.eval.stress import LONG_FRAMES, write_stress_inputs
 from usd_garment.garment.template import GARMENT_NAMES, LODS
 from usd_garment.methods import available_methods
-from usd_garment.methods.learned import LearnedMethod, shipped_model
+from usd_garment.methods.learned import LEARNED_METHODS, LearnedMethod, shipped_model
 from usd_garment.methods.learned_model import load_learned_model
 from usd_garment.methods.simulation import SimulationMethod
 from usd_garment.training.dataset import dataset_layers
 
 #: Methods benched when none is named (the learned one only where a model ships).
-DEFAULT_METHODS = ("learned", "lbs", "lbs+postprocess")
+DEFAULT_METHODS = ("learned", "learned+postprocess", "lbs", "lbs+postprocess")
 
 
 def _labelled_models(values: tuple[str, ...]) -> list[tuple[str, Path]]:
@@ -47,21 +47,23 @@ def _methods(
     simulation on the first ``simulation_frames`` at ``simulation_lods``, the others at every
     one of ``lods``."""
     out = []
+    runs: list[tuple[str, str, Path | None]] = []  # label, method, model directory
     for name in names or DEFAULT_METHODS:
-        if name == LearnedMethod.name:
+        if name in LEARNED_METHODS:
             path = shipped_model(garment)
             if path is not None or names:
-                models = [(name, path), *models]
+                runs.append((name, name, path))
         elif name == SimulationMethod.name:
             continue
         else:
             out.append(BenchMethod(name, name, lods=lods))
+    runs += [(label, LearnedMethod.name, path) for label, path in models]
     learned = []
-    for label, path in models:
+    for label, method, path in runs:
         if path is None:
             raise click.UsageError(f"no trained model ships for the garment '{garment}'")
         lod = load_learned_model(path).lod
-        learned.append(BenchMethod(label, LearnedMethod.name, path, lods=(lod,)))
+        learned.append(BenchMethod(label, method, path, lods=(lod,)))
     out = learned + out
     if simulation_frames > 0 or SimulationMethod.name in names:
         frames = simulation_frames if simulation_frames > 0 else 30
@@ -101,7 +103,8 @@ def _methods(
     "names",
     multiple=True,
     type=click.Choice(available_methods()),
-    help="Methods to bench (repeat); default: learned (where a model ships), lbs, lbs+postprocess.",
+    help="Methods to bench (repeat); default: learned and learned+postprocess (where a model "
+    "ships), lbs, lbs+postprocess.",
 )
 @click.option(
     "--model",

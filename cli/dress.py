@@ -21,7 +21,13 @@ from usd_garment.cli.options import (
 from usd_garment.dress import dress as dress_stage
 from usd_garment.garment.template import GARMENT_NAMES
 from usd_garment.methods import available_methods
-from usd_garment.methods.learned import LearnedMethod, default_method
+from usd_garment.methods.learned import (
+    LEARNED_METHODS,
+    LearnedMethod,
+    LearnedPushOutMethod,
+    default_method,
+    learned_method,
+)
 
 #: The level of detail of each --quality.
 QUALITY_LODS = {"draft": "low", "final": "high"}
@@ -46,7 +52,8 @@ QUALITY_LODS = {"draft": "low", "final": "high"}
     "--method",
     default=None,
     help=f"Garment method: {', '.join(available_methods())}. Default: learned, with the "
-    "shipped model of the garment (lbs+postprocess for a garment without one).",
+    "shipped model of the garment (learned+postprocess with --quality final; lbs+postprocess "
+    "for a garment without a model).",
 )
 @click.option(
     "--model",
@@ -70,7 +77,8 @@ QUALITY_LODS = {"draft": "low", "final": "high"}
     type=click.Choice(tuple(QUALITY_LODS)),
     default=None,
     help="Pick the level of detail for the use: draft (low: fast previews and layout) or final "
-    "(high); instead of --lod.",
+    "(high, and by default the learned garment pushed out of the body wherever it enters it: "
+    "slower); instead of --lod.",
 )
 @click.option(
     "--proxy",
@@ -105,15 +113,22 @@ def dress(
             raise click.BadParameter("give --quality or --lod, not both", param_hint="--quality")
         lod = QUALITY_LODS[quality]
     if method is None:
-        method = LearnedMethod.name if model is not None else default_method(garment, lod)
-    if model is not None and method != LearnedMethod.name:
-        raise click.BadParameter("a model directory is for --method learned", param_hint="--model")
+        final = quality == "final"
+        if model is None:
+            method = default_method(garment, lod, collision_free=final)
+        else:
+            method = LearnedPushOutMethod.name if final else LearnedMethod.name
+    if model is not None and method not in LEARNED_METHODS:
+        raise click.BadParameter(
+            f"a model directory is for --method {' or '.join(LEARNED_METHODS)}",
+            param_hint="--model",
+        )
     with FrameProgress(method) as bar, user_errors():
         result = dress_stage(
             input_path,
             output,
             garment=garment,
-            method=LearnedMethod(model) if method == LearnedMethod.name else method,
+            method=learned_method(method, model) if method in LEARNED_METHODS else method,
             frames=frame_range,
             lod=lod,
             body_model=body_model,

@@ -136,3 +136,25 @@ def test_shipped_tshirt_model_is_the_default(body_model: BodyModel, synthetic_bo
     points, _, layer = read_garment_layer(tmp_path / "walk_tshirt.usdc")
     assert layer.method == "learned" and points.shape == (12, 4405, 3)
     assert np.isfinite(points).all()
+
+
+def test_final_quality_pushes_the_learned_garment_out(body_model: BodyModel,
+                                                      synthetic_body: BodyModel,
+                                                      tmp_path: Path) -> None:  # fmt: skip
+    """``--quality final`` dresses with learned+postprocess: the shipped model's garment, then
+    no vertex left inside the posed body elsewhere than where the pose forces it."""
+    from usd_garment.eval.evaluate import evaluate_layer
+
+    if body_model is synthetic_body:
+        pytest.skip("needs the embedded default body and its fields")
+    body = tmp_path / "run.usda"
+    write_body_layer(body, make_motion("run", 10, 30.0, seed=8, body=body_model), body_model)
+    shares = {}
+    for quality, method in ((None, "learned"), ("final", "learned+postprocess")):
+        out = tmp_path / f"{method}.usdc"
+        code, output = _run(["dress", body, "-o", out, *(["--quality", quality] if quality else [])])
+        assert code == 0, output
+        points, _, layer = read_garment_layer(out)
+        assert layer.method == method and points.shape == (10, 4405, 3)
+        shares[method] = evaluate_layer(out, body)[0].summary()["inside_elsewhere_share"]
+    assert shares["learned+postprocess"] == 0.0, shares

@@ -20,7 +20,7 @@ from usd_garment.dress import dress
 from usd_garment.eval.evaluate import evaluate_layer
 from usd_garment.eval.metrics import GarmentMetrics
 from usd_garment.methods import GarmentMethod, get_method
-from usd_garment.methods.learned import LearnedMethod
+from usd_garment.methods.learned import LEARNED_METHODS, learned_method
 from usd_garment.usd.read import read_smpl_motion
 
 
@@ -61,8 +61,8 @@ class BenchMethod:
 
     def instance(self) -> GarmentMethod:
         """A new instance of the method."""
-        if self.method == LearnedMethod.name:
-            return LearnedMethod(self.model)
+        if self.method in LEARNED_METHODS:
+            return learned_method(self.method, self.model)
         return get_method(self.method)
 
 

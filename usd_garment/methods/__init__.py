@@ -2,12 +2,13 @@
 
 from usd_garment.methods.base import GarmentMethod, available_methods, get_method, register_method
 from usd_garment.methods.lbs import LbsMethod, LbsPushOutMethod
-from usd_garment.methods.learned import LearnedMethod
+from usd_garment.methods.learned import LearnedMethod, LearnedPushOutMethod
 from usd_garment.methods.simulation import SimulationMethod
 
 register_method(LbsMethod.name, LbsMethod)
 register_method(LbsPushOutMethod.name, LbsPushOutMethod)
 register_method(SimulationMethod.name, SimulationMethod)
 register_method(LearnedMethod.name, LearnedMethod)
+register_method(LearnedPushOutMethod.name, LearnedPushOutMethod)
 
 __all__ = ["GarmentMethod", "available_methods", "get_method", "register_method"]

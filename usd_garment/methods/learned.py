@@ -1,5 +1,7 @@
 """The learned garment method of the paper: motion descriptor γ → GRU regressor → latent codes z →
-VAE decoder → canonical garment X → garment model M_G(X, β, θ) → posed garment.
+VAE decoder → canonical garment X → garment model M_G(X, β, θ) → posed garment; and the same
+followed by the baselines' push-out post-process ("learned+postprocess": no garment vertex left
+inside the posed body where the pose does not force it, at a fraction of the speed).
 
 The networks run at the model's 30 fps: the input motion is resampled to it, and the latent codes
 are interpolated back to the input's frames before decoding and posing with the input's own
@@ -18,11 +20,13 @@ import numpy as np
 import torch
 
 from usd_garment.body.model import BodyModel
+from usd_garment.eval.body_distance import BodySurface
 from usd_garment.fields.body_fields import BodyFields, load_body_fields
 from usd_garment.garment.model import GarmentModel
 from usd_garment.garment.template import GarmentTemplate
 from usd_garment.methods.base import Progress, predict_chunks
 from usd_garment.methods.learned_model import LearnedModel, ModelError, load_learned_model
+from usd_garment.methods.postprocess import PUSH_OUT_EPS, PUSH_OUT_PASSES, push_out
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.regressor.descriptor import MODEL_FPS, describe_motion
 
@@ -45,10 +49,27 @@ def shipped_model(garment: str, lod: str | None = None) -> Path | None:
     return path
 
 
-def default_method(garment: str, lod: str) -> str:
+def default_method(garment: str, lod: str, collision_free: bool = False) -> str:
     """The method ``dress`` uses when none is asked for: "learned" where a trained model of
-    ``garment`` at ``lod`` ships, else the "lbs+postprocess" baseline."""
-    return LearnedMethod.name if shipped_model(garment, lod) is not None else "lbs+postprocess"
+    ``garment`` at ``lod`` ships ("learned+postprocess" when ``collision_free``), else the
+    "lbs+postprocess" baseline."""
+    if shipped_model(garment, lod) is None:
+        return "lbs+postprocess"
+    return LearnedPushOutMethod.name if collision_free else LearnedMethod.name
+
+
+def learned_method(name: str, model: str | Path | None = None) -> LearnedMethod:
+    """The learned method registered as ``name`` (one of :data:`LEARNED_METHODS`) with the
+    model directory ``model`` (None: the shipped default).
+
+    Raises:
+        ValueError: ``name`` is not a learned method.
+    """
+    if name == LearnedMethod.name:
+        return LearnedMethod(model)
+    if name == LearnedPushOutMethod.name:
+        return LearnedPushOutMethod(model)
+    raise ValueError(f"'{name}' is not a learned method ({', '.join(LEARNED_METHODS)})")
 
 
 def to_frames(values: torch.Tensor, fps: float, count: int) -> torch.Tensor:
@@ -77,6 +98,8 @@ class LearnedMethod:
     """
 
     name = "learned"
+    #: Push vertices inside or within ε of the posed body out (:func:`push_out`).
+    push_out = False
 
     def __init__(
         self,
@@ -99,6 +122,8 @@ class LearnedMethod:
             "model": str(self.model_path) if self.model_path else "shipped",
             "fields": "exact" if self.exact_fields else "linearized per chunk",
         }
+        if self.push_out:
+            out.update(push_out_eps_m=PUSH_OUT_EPS, push_out_passes=PUSH_OUT_PASSES)
         if self._model is not None:
             out.update(
                 garment=self._model.garment,
@@ -171,6 +196,7 @@ class LearnedMethod:
         if self._fields is None:
             self._fields = load_body_fields()
         garment_model = GarmentModel(body, self._fields)
+        surface = BodySurface(body.faces.numpy(), body.num_vertices) if self.push_out else None
         betas = torch.as_tensor(motion.betas, dtype=torch.float32)
         pose = torch.as_tensor(motion.pose, dtype=torch.float32)
         trans = torch.as_tensor(motion.trans, dtype=torch.float32)
@@ -189,4 +215,20 @@ class LearnedMethod:
                     art = garment_model.articulation(betas, pose[a:b], trans[a:b])
                     parts.append(garment_model.pose(x[a - s : b - s], art, tangent).vertices)
                 points = torch.cat(parts).numpy()
+                if surface is not None:
+                    posed = body(betas, pose[s:e], trans[s:e]).vertices.numpy()
+            if surface is not None:
+                points = push_out(points, posed, surface)
             yield points
+
+
+class LearnedPushOutMethod(LearnedMethod):
+    """The learned garment, then vertices inside or within ε = 2 mm of the posed body pushed out
+    (the baselines' post-process, winding-number inside test)."""
+
+    name = "learned+postprocess"
+    push_out = True
+
+
+#: The registry names of the learned methods (they take a model directory).
+LEARNED_METHODS = (LearnedMethod.name, LearnedPushOutMethod.name)
