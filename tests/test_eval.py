@@ -16,8 +16,8 @@ from usd_garment.dress import dress
 from usd_garment.eval.body_distance import BodySurface, signed_distance
 from usd_garment.eval.evaluate import evaluate_layer, posed_body_vertices
 from usd_garment.eval.metrics import evaluate_garment
+from usd_garment.eval.push_out import PUSH_OUT_EPS
 from usd_garment.methods import available_methods, get_method
-from usd_garment.methods.postprocess import PUSH_OUT_EPS
 from usd_garment.usd.body_layer import write_body_layer
 
 

@@ -152,7 +152,8 @@ def test_final_quality_pushes_the_learned_garment_out(body_model: BodyModel,
     shares = {}
     for quality, method in ((None, "learned"), ("final", "learned+postprocess")):
         out = tmp_path / f"{method}.usdc"
-        code, output = _run(["dress", body, "-o", out, *(["--quality", quality] if quality else [])])
+        extra = ["--quality", quality] if quality else []
+        code, output = _run(["dress", body, "-o", out, *extra])
         assert code == 0, output
         points, _, layer = read_garment_layer(out)
         assert layer.method == method and points.shape == (10, 4405, 3)

@@ -152,6 +152,30 @@ def test_simulator_body_distance_matches_reference() -> None:
     np.testing.assert_allclose(sim.body_distance(), reference, atol=1e-5)
 
 
+def test_projection_keeps_no_velocity_against_the_move() -> None:
+    """``project`` moves the vertices and removes the velocity component against each move (an
+    inelastic contact), keeping the rest of it; vertices that do not move keep theirs."""
+    body = trimesh.creation.icosphere(subdivisions=2, radius=0.1)
+    vertices, faces = tube(0.075, 0.4, 8, 4)
+    sim = GarmentSimulator(vertices, faces, body.faces, body.vertices)
+    velocity = np.tile([[-1.0, 0.5, 0.0]], (len(vertices), 1))  # into -x, along +y
+    sim.state_0.particle_qd.assign(velocity.astype(np.float32))
+    moved = vertices.copy()
+    moved[:4, 0] += 0.003  # pushed out along +x
+    moved[4:8, 0] -= 0.003  # pushed along -x: the velocity is not against the move
+    sim.project(moved)
+    np.testing.assert_allclose(sim.points, moved, atol=1e-6)
+    after = sim.state_0.particle_qd.numpy()
+    np.testing.assert_allclose(after[:4], [[0.0, 0.5, 0.0]] * 4, atol=1e-6)
+    np.testing.assert_allclose(after[4:], velocity[4:], atol=1e-6)
+
+
+def test_limits_per_garment() -> None:
+    """A dress's hem swings free of the legs: its fell-off distance is beyond the T-shirt's."""
+    assert CheckLimits.for_garment("tshirt") == CheckLimits()
+    assert CheckLimits.for_garment("dress").max_distance > 2 * CheckLimits().max_distance
+
+
 def test_forced_contact_is_not_a_failure() -> None:
     """Cloth on an arm pressed into the trunk lies inside the body, forced by the pose: the
     frame passes; the same share inside elsewhere fails it."""

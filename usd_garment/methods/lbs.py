@@ -12,9 +12,9 @@ from scipy.spatial import cKDTree
 from usd_garment.body.lbs import blend_shapes, skin
 from usd_garment.body.model import BodyModel
 from usd_garment.eval.body_distance import BodySurface
+from usd_garment.eval.push_out import PUSH_OUT_EPS, PUSH_OUT_PASSES, push_out
 from usd_garment.garment.template import GarmentTemplate
 from usd_garment.methods.base import Progress, predict_chunks
-from usd_garment.methods.postprocess import PUSH_OUT_EPS, PUSH_OUT_PASSES, push_out
 from usd_garment.motion.sequence import SmplMotion
 
 #: Frames posed at once (bounds memory: the body pass holds ~V·12 floats per frame).

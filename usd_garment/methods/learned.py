@@ -21,12 +21,12 @@ import torch
 
 from usd_garment.body.model import BodyModel
 from usd_garment.eval.body_distance import BodySurface
+from usd_garment.eval.push_out import PUSH_OUT_EPS, PUSH_OUT_PASSES, push_out
 from usd_garment.fields.body_fields import BodyFields, load_body_fields
 from usd_garment.garment.model import GarmentModel
 from usd_garment.garment.template import GarmentTemplate
 from usd_garment.methods.base import Progress, predict_chunks
 from usd_garment.methods.learned_model import LearnedModel, ModelError, load_learned_model
-from usd_garment.methods.postprocess import PUSH_OUT_EPS, PUSH_OUT_PASSES, push_out
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.regressor.descriptor import MODEL_FPS, describe_motion
 

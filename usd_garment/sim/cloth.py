@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from usd_garment.eval.body_distance import BodySurface
+from usd_garment.eval.push_out import push_out
 from usd_garment.sim.checks import (
     CheckLimits,
     FrameCheck,
@@ -38,6 +39,8 @@ SUBSTEPS = 4
 ITERATIONS = 10
 #: Most substeps a failing frame is retried with (the substeps double on each retry).
 MAX_SUBSTEPS = 16
+#: Moves (m) below this are float rounding, not projections (``GarmentSimulator.project``).
+MOVE_TOLERANCE = 1e-6
 #: Most consecutive bad frames (failing their checks even with ``MAX_SUBSTEPS``) a sequence may
 #: keep before it fails: a short run is a hard moment of the motion, a long one a lost garment.
 MAX_BAD_RUN = 10
@@ -55,6 +58,11 @@ class ContactSettings:
         stiffness: penalty stiffness of the body contact (N/m per vertex).
         damping: damping of the body contact along its normal (N·s/m).
         self_radius: half-thickness of cloth-cloth contacts (m); Style3D's default is 3 mm.
+        project: after each frame, move the vertices inside the body (where the pose does not
+            force it) or closer than 2 mm to it out to 2 mm (``push_out``, the winding-number
+            query) and drop their velocity against the move (an inelastic contact). The
+            penalty contact alone leaves cloth pinched in gaps narrower than two contact radii
+            (a hanging arm against the trunk) inside one part or the other.
     """
 
     radius: float = 4e-3
@@ -62,6 +70,7 @@ class ContactSettings:
     stiffness: float = 1e3
     damping: float = 1e-4
     self_radius: float = 3e-3
+    project: bool = True
 
 
 def _import_newton() -> tuple[Any, Any]:
@@ -251,6 +260,19 @@ class GarmentSimulator:
         self.body_vertices = body.copy()
         self._set_body(body, np.zeros_like(body))
         self._cover_body(body)
+
+    def project(self, points: np.ndarray) -> None:
+        """Move the garment vertices to ``points`` ``(N, 3)`` (m) between frames, as inelastic
+        contacts: a vertex moved by more than ``MOVE_TOLERANCE`` keeps no velocity against its
+        move."""
+        before = self.state_0.particle_q.numpy().astype(np.float64)
+        velocity = self.state_0.particle_qd.numpy().astype(np.float64)
+        move = np.asarray(points, dtype=np.float64) - before
+        length = np.linalg.norm(move, axis=1, keepdims=True)
+        unit = np.divide(move, length, out=np.zeros_like(move), where=length > MOVE_TOLERANCE)
+        velocity -= np.minimum((velocity * unit).sum(axis=1, keepdims=True), 0.0) * unit
+        self.state_0.particle_q.assign(np.asarray(points, dtype=np.float32))
+        self.state_0.particle_qd.assign(velocity.astype(np.float32))
 
     def _set_body(self, vertices: np.ndarray, velocities: np.ndarray) -> None:
         """Move the body colliders: overwrite their Warp meshes and refit the meshes' BVHs."""
@@ -453,8 +475,9 @@ def simulate_sequence(
     The garment starts in its rest shape (or at ``initial_vertices``) on ``body_rest`` (the
     body it was modelled on). The body then eases into ``body_frames[0]`` over the lead-in,
     holds it for ``settle_frames`` so the cloth settles, and plays the motion. Each frame is
-    checked (``measure_frame``: the shared winding-number query against the frame's body,
-    judged on inside-elsewhere, see ``CheckLimits``). A frame that fails its checks is simulated
+    projected out of the body (``ContactSettings.project``) and checked (``measure_frame``:
+    the shared winding-number query against the frame's body, judged on inside-elsewhere, see
+    ``CheckLimits``). A frame that fails its checks is simulated
     again from the state before it with twice the substeps, up to ``max_substeps``. A frame that
     still fails is *bad*: with ``strict`` the sequence stops there with status "failed";
     otherwise it is kept, flagged in ``SimResult.bad``, and the simulation goes on from it,
@@ -505,6 +528,7 @@ def simulate_sequence(
         lead = np.asarray(lead_in, dtype=np.float64).reshape(-1, *body_frames.shape[1:])
     warmup = np.concatenate([lead, np.repeat(body_frames[:1], settle_frames, axis=0)])
     limits = limits or CheckLimits()
+    contact = contact or ContactSettings()
 
     sim = GarmentSimulator(
         rest_vertices, faces, body_faces, start_body, material,
@@ -526,6 +550,11 @@ def simulate_sequence(
         while True:
             sim.substeps = tries
             points = sim.step(body)
+            if contact.project and np.isfinite(points).all():
+                pushed = push_out(points[None], body[None], sim.surface)[0]
+                if not np.array_equal(pushed, points):
+                    sim.project(pushed)
+                    points = sim.points
             check = measure_frame(points, body, sim.surface, rest_lengths, edges, limits)
             reasons = check.failures(limits)
             if not reasons or tries * 2 > max_substeps:

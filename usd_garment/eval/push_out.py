@@ -1,5 +1,6 @@
-"""The common collision post-process of garment baselines: push garment vertices that are inside
-the posed body (by winding number), or closer than ε to it, out along the body normal to ε
+"""The common collision post-process of garment methods (the baselines, the learned method's
+"+postprocess" variant, the simulator's end-of-frame projection): push garment vertices that are
+inside the posed body (by winding number), or closer than ε to it, out along the body normal to ε
 outside. Vertices whose closest body point lies itself inside the body (a limb pressed into the
 trunk) have no outside to go to and stay where they are. In a crease narrower than 2ε (the gap
 between a hanging arm and the trunk) a push out of one part lands in the other, so each later
