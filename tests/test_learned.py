@@ -116,25 +116,28 @@ def test_latents_return_to_the_input_frames() -> None:
     np.testing.assert_allclose(to_frames(values[:1], 24.0, 3)[:, 0].numpy(), [0, 0, 0])
 
 
-def test_shipped_tshirt_model_is_the_default(body_model: BodyModel, synthetic_body: BodyModel,
-                                             tmp_path: Path) -> None:  # fmt: skip
+@pytest.mark.parametrize(("garment", "vertices"), [("tshirt", 4405), ("dress", 4432)])
+def test_shipped_model_is_the_default(
+    garment: str, vertices: int, body_model: BodyModel, synthetic_body: BodyModel, tmp_path: Path
+) -> None:
     from usd_garment.methods.learned import SHIPPED_MODELS, default_method, shipped_model
 
     if body_model is synthetic_body:
         pytest.skip("needs the embedded default body and its fields")
-    folder = shipped_model("tshirt", "high")
-    assert folder == SHIPPED_MODELS / "tshirt" and default_method("tshirt", "high") == "learned"
+    folder = shipped_model(garment, "high")
+    assert folder == SHIPPED_MODELS / garment and default_method(garment, "high") == "learned"
     assert sum(p.stat().st_size for p in folder.iterdir()) <= 12 * 2**20
     info = json.loads((folder / "model.json").read_text())
     assert info["command"].startswith("usd-garment train all") and info["ablation"] == "none"
     assert set(info["training"]["data"]["frames"]) == {"train", "validation", "test"}
-    assert load_learned_model(folder, body_model).vertices == 4405
+    assert load_learned_model(folder, body_model).vertices == vertices
     body = tmp_path / "walk.usda"
     write_body_layer(body, make_motion("walk", 12, 30.0, seed=21, body=body_model), body_model)
-    code, output = _run(["dress", body, "-o", tmp_path / "walk_tshirt.usdc"])
+    out = tmp_path / f"walk_{garment}.usdc"
+    code, output = _run(["dress", body, "-o", out, "--garment", garment])
     assert code == 0, output
-    points, _, layer = read_garment_layer(tmp_path / "walk_tshirt.usdc")
-    assert layer.method == "learned" and points.shape == (12, 4405, 3)
+    points, _, layer = read_garment_layer(out)
+    assert layer.method == "learned" and points.shape == (12, vertices, 3)
     assert np.isfinite(points).all()
 
 
