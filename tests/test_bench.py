@@ -98,7 +98,7 @@ def test_a_failing_method_is_a_row_not_the_end(tmp_path: Path, walk: Path) -> No
     [
         (["--model", "nolabel"], "expected LABEL=DIR"),
         (["--reference", "a.usdc", "--reference", "b.usdc"], "one --reference per INPUT"),
-        (["--method", "learned", "--garment", "dress"], "no trained model ships"),
+        (["--model", "x=no_such_model"], "not a model directory"),
         (["--capture", "clip.bvh"], "--capture is for --stress"),
     ],
 )
