@@ -20,7 +20,13 @@ from usd_garment.sim.checks import (
     measure_frame,
     unique_edges,
 )
-from usd_garment.sim.cloth import GarmentSimulator, SimResult, panel_layout, simulate_sequence
+from usd_garment.sim.cloth import (
+    ContactSettings,
+    GarmentSimulator,
+    SimResult,
+    panel_layout,
+    simulate_sequence,
+)
 from usd_garment.sim.material import ClothMaterial
 
 pytest.importorskip("newton")
@@ -168,6 +174,27 @@ def test_projection_keeps_no_velocity_against_the_move() -> None:
     after = sim.state_0.particle_qd.numpy()
     np.testing.assert_allclose(after[:4], [[0.0, 0.5, 0.0]] * 4, atol=1e-6)
     np.testing.assert_allclose(after[4:], velocity[4:], atol=1e-6)
+
+
+def test_projection_moves_cloth_out_of_the_body() -> None:
+    """A sleeve at rest 3 cm deep in a still arm: the end-of-frame projection moves it out
+    (no vertex left inside after the first frame) and the per-frame quality says how many it
+    moved; without the projection none is counted."""
+    body = capsule()
+    vertices, faces = tube(0.075, 0.4, 12, 7)
+    sleeve = vertices * np.array([1.0, 0.4, 0.4])  # at rest 3 cm inside the 6 cm arm
+    frames = np.repeat(np.asarray(body.vertices)[None], 2, axis=0)
+    results = {
+        project: simulate_sequence(
+            sleeve, faces, body.faces, frames, settle_frames=0,
+            contact=ContactSettings(project=project), max_substeps=4,
+        )
+        for project in (True, False)
+    }  # fmt: skip
+    on, off = results[True], results[False]
+    assert on.ok and off.ok
+    assert on.projected[0] > 0.9 and on.checks[0].inside_share == 0.0
+    assert off.projected == [0.0, 0.0]
 
 
 def test_limits_per_garment() -> None:

@@ -72,8 +72,9 @@ def test_simulate_writes_a_simulation_layer(tmp_path: Path) -> None:
     assert settings["max_distance_m"] < 0.15 and settings["penetrating_share_max"] <= 0.005
     assert settings["strict"] is False and settings["bad_frames"] == 0
     per_frame = settings["per_frame"]
-    for key in ("inside_forced", "inside_elsewhere", "stretch_p99", "substeps", "bad"):
+    for key in ("inside_forced", "inside_elsewhere", "stretch_p99", "projected", "substeps", "bad"):
         assert len(per_frame[key]) == 4, key
+    assert 0.0 <= settings["projected_share_mean"] <= settings["projected_share_max"] <= 1.0
     assert per_frame["bad"] == [0] * 4 and per_frame["substeps"] == [SUBSTEPS] * 4
     assert max(per_frame["inside_elsewhere"]) <= settings["inside_elsewhere_share_max"] + 1e-6
     assert 1.0 < settings["lead_in_stretch_p99_first"] < 1.06

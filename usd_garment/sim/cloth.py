@@ -399,6 +399,8 @@ class SimResult:
         substeps: substeps each frame of ``checks`` needed (more than asked after a retry).
         bad: per frame of ``checks``, whether it failed its checks even with the most substeps
             (kept unless strict; the last one of a failed sequence is the failing frame).
+        projected: per frame of ``checks``, the share of vertices the end-of-frame projection
+            moved out of the body (``ContactSettings.project``; 0 when off).
         lead_in_checks: one ``FrameCheck`` per lead-in and settle frame simulated.
         lead_in_bad: per lead-in and settle frame, whether it was bad.
         seconds_per_frame: mean wall time per simulated frame (lead-in included, checks and
@@ -411,6 +413,7 @@ class SimResult:
     checks: list[FrameCheck] = field(default_factory=list)
     substeps: list[int] = field(default_factory=list)
     bad: list[bool] = field(default_factory=list)
+    projected: list[float] = field(default_factory=list)
     lead_in_checks: list[FrameCheck] = field(default_factory=list)
     lead_in_bad: list[bool] = field(default_factory=list)
     seconds_per_frame: float = 0.0
@@ -550,11 +553,14 @@ def simulate_sequence(
         while True:
             sim.substeps = tries
             points = sim.step(body)
+            moved = 0.0
             if contact.project and np.isfinite(points).all():
                 pushed = push_out(points[None], body[None], sim.surface)[0]
-                if not np.array_equal(pushed, points):
+                changed = np.any(pushed != points, axis=1)
+                if changed.any():
                     sim.project(pushed)
                     points = sim.points
+                    moved = float(changed.mean())
             check = measure_frame(points, body, sim.surface, rest_lengths, edges, limits)
             reasons = check.failures(limits)
             if not reasons or tries * 2 > max_substeps:
@@ -569,6 +575,7 @@ def simulate_sequence(
             result.checks.append(check)
             result.substeps.append(tries)
             result.bad.append(bad)
+            result.projected.append(moved)
         else:
             result.lead_in_checks.append(check)
             result.lead_in_bad.append(bad)
@@ -585,6 +592,7 @@ def simulate_sequence(
                 result.checks.append(check)
                 result.substeps.append(tries)
                 result.bad.append(True)
+                result.projected.append(moved)
             result.status = "failed"
             result.message = f"{stage}: {stop} (with {tries} substeps)"
             break
