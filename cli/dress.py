@@ -76,7 +76,8 @@ QUALITY_LODS = {"draft": "low", "final": "high"}
     "--quality",
     type=click.Choice(tuple(QUALITY_LODS)),
     default=None,
-    help="Pick the level of detail for the use: draft (low: fast previews and layout) or final "
+    help="Pick the level of detail for the use: draft (low: fast previews and layout; a learned "
+    "model of the high mesh is carried down to it) or final "
     "(high, and by default the learned garment pushed out of the body wherever it enters it: "
     "slower); instead of --lod.",
 )

@@ -162,3 +162,24 @@ def test_final_quality_pushes_the_learned_garment_out(body_model: BodyModel,
         assert layer.method == method and points.shape == (10, 4405, 3)
         shares[method] = evaluate_layer(out, body)[0].summary()["inside_elsewhere_share"]
     assert shares["learned+postprocess"] == 0.0, shares
+
+
+def test_draft_carries_the_shipped_model_down(body_model: BodyModel, synthetic_body: BodyModel,
+                                              tmp_path: Path) -> None:  # fmt: skip
+    """``--quality draft`` dresses the low mesh with the high model's networks: its garment is
+    the high one carried down through the rest-surface correspondence."""
+    from usd_garment.garment.lod import carry_to_lod
+
+    if body_model is synthetic_body:
+        pytest.skip("needs the embedded default body and its fields")
+    body = tmp_path / "walk.usda"
+    write_body_layer(body, make_motion("walk", 6, 30.0, seed=4, body=body_model), body_model)
+    code, output = _run(["dress", body, "-o", tmp_path / "draft.usdc", "--quality", "draft"])
+    assert code == 0, output
+    draft, _, layer = read_garment_layer(tmp_path / "draft.usdc")
+    assert layer.method == "learned"
+    assert draft.shape == (6, len(load_template("tshirt", "low").vertices), 3)
+    code, output = _run(["dress", body, "-o", tmp_path / "high.usdc"])
+    assert code == 0, output
+    high = read_garment_layer(tmp_path / "high.usdc")[0]
+    np.testing.assert_allclose(draft, carry_to_lod(high, "tshirt", "high", "low"), atol=1e-5)

@@ -23,8 +23,9 @@ from usd_garment.body.model import BodyModel
 from usd_garment.eval.body_distance import BodySurface
 from usd_garment.eval.push_out import PUSH_OUT_EPS, PUSH_OUT_PASSES, push_out
 from usd_garment.fields.body_fields import BodyFields, load_body_fields
+from usd_garment.garment.lod import carry_to_lod
 from usd_garment.garment.model import GarmentModel
-from usd_garment.garment.template import GarmentTemplate
+from usd_garment.garment.template import LODS, GarmentTemplate
 from usd_garment.methods.base import Progress, predict_chunks
 from usd_garment.methods.learned_model import LearnedModel, ModelError, load_learned_model
 from usd_garment.motion.sequence import SmplMotion
@@ -39,14 +40,21 @@ POSE_FRAMES = 64
 
 
 def shipped_model(garment: str, lod: str | None = None) -> Path | None:
-    """The shipped default model directory of ``garment`` (trained on ``lod``, when given), or
-    None when there is none."""
+    """The shipped default model directory of ``garment`` (when ``lod`` is given: one that
+    dresses it, trained on ``lod`` or on a finer level it is carried down from), or None when
+    there is none."""
     path = SHIPPED_MODELS / garment
     if not (path / "model.json").is_file():
         return None
-    if lod is not None and json.loads((path / "model.json").read_text()).get("lod") != lod:
+    if lod is not None and not _dresses(json.loads((path / "model.json").read_text())["lod"], lod):
         return None
     return path
+
+
+def _dresses(model_lod: str, lod: str) -> bool:
+    """Whether a model trained on ``model_lod`` dresses the level of detail ``lod``: its own, or
+    a coarser one that its garments are carried down to (``carry_to_lod``)."""
+    return model_lod in LODS and lod in LODS and LODS[model_lod] >= LODS[lod]
 
 
 def default_method(garment: str, lod: str, collision_free: bool = False) -> str:
@@ -181,13 +189,16 @@ class LearnedMethod:
     ) -> Iterator[np.ndarray]:
         """Posed garment points in consecutive chunks ``(t ≤ chunk, N, 3)`` float32 (m): the
         latent codes of the whole motion first (the GRU, ``(T, L)``: small), then each chunk
-        decoded and posed.
+        decoded and posed. A ``template`` coarser than the model's level of detail gets the
+        model's garment carried down to it (``carry_to_lod``: a draft from the same networks).
 
         Raises:
-            ModelError: no usable model, or one trained on another template.
+            ModelError: no usable model, or one trained on another template (or a coarser
+                level of detail than ``template``'s).
         """
         model = self.load(template.name, body)
-        if len(template.vertices) != model.vertices:
+        carried = template.lod != model.lod and _dresses(model.lod, template.lod)
+        if len(template.vertices) != model.vertices and not carried:
             raise ModelError(
                 f"{self.model_path}: trained on the {model.lod} {model.garment} "
                 f"({model.vertices} vertices), not the {template.lod} one "
@@ -217,6 +228,8 @@ class LearnedMethod:
                 points = torch.cat(parts).numpy()
                 if surface is not None:
                     posed = body(betas, pose[s:e], trans[s:e]).vertices.numpy()
+            if carried:
+                points = carry_to_lod(points, template.name, model.lod, template.lod)
             if surface is not None:
                 points = push_out(points, posed, surface)
             yield points
