@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from usd_garment.eval.body_distance import BodySurface, signed_distance
+from usd_garment.eval.body_distance import BodyDistance, BodySurface, signed_distance
 
 #: Distance outside the body that pushed vertices are moved to (m); DESIGN.md, 2 mm.
 PUSH_OUT_EPS = 2e-3
@@ -25,6 +25,7 @@ def push_out(
     surface: BodySurface,
     eps: float = PUSH_OUT_EPS,
     passes: int = PUSH_OUT_PASSES,
+    first: BodyDistance | None = None,
 ) -> np.ndarray:
     """Move every point closer than ``eps`` to the body (or inside it) to ``eps`` outside,
     unless its closest body point lies inside another part of the body; pass k re-checks the
@@ -37,6 +38,8 @@ def push_out(
         eps: target distance outside the body (m) of the first pass.
         passes: how many times to re-check the moved points (a push can land a vertex inside
             another body part in a crease, e.g. out of the trunk into the arm).
+        first: the query of ``points`` already made with ``probe_below=eps``, for the first
+            pass (None: made here).
 
     Returns:
         ``(T, N, 3)`` pushed points, the input's dtype.
@@ -47,7 +50,10 @@ def push_out(
         if columns.size == 0:
             break
         step = eps / 2**k
-        query = signed_distance(out[:, columns], body_vertices, surface, probe_below=step)
+        if k == 0 and first is not None:
+            query = first
+        else:
+            query = signed_distance(out[:, columns], body_vertices, surface, probe_below=step)
         near = (query.distance < step) & ~query.closest_inside  # (T, C)
         if not near.any():
             break

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from usd_garment.eval.body_distance import BodySurface, signed_distance
+from usd_garment.eval.body_distance import BodyDistance, BodySurface, signed_distance
 
 
 @dataclass(frozen=True)
@@ -200,10 +200,15 @@ def measure_frame(
     rest_edge_lengths: np.ndarray,
     edges: np.ndarray,
     limits: CheckLimits,
+    query: BodyDistance | None = None,
 ) -> FrameCheck:
     """``check_frame`` with the shared winding-number query of ``points`` ``(N, 3)`` (m) against
-    the frame's body ``(V, 3)`` (m); frames with NaNs are not queried."""
+    the frame's body ``(V, 3)`` (m); frames with NaNs are not queried. ``query``: that query
+    already made (one frame, any ``probe_below`` ≥ 0), reused instead of a new one."""
     if not np.isfinite(points).all():
         return check_frame(points, np.zeros(len(points)), rest_edge_lengths, edges, limits)
-    distance, forced = frame_body_distance(points, body_vertices, surface)
+    if query is not None:
+        distance, forced = query.distance[0], query.forced[0]
+    else:
+        distance, forced = frame_body_distance(points, body_vertices, surface)
     return check_frame(points, distance, rest_edge_lengths, edges, limits, forced)

@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from usd_garment.eval.body_distance import BodySurface
-from usd_garment.eval.push_out import push_out
+from usd_garment.eval.body_distance import BodySurface, signed_distance
+from usd_garment.eval.push_out import PUSH_OUT_EPS, push_out
 from usd_garment.sim.checks import (
     CheckLimits,
     FrameCheck,
@@ -553,15 +553,19 @@ def simulate_sequence(
         while True:
             sim.substeps = tries
             points = sim.step(body)
-            moved = 0.0
+            moved, query = 0.0, None
             if contact.project and np.isfinite(points).all():
-                pushed = push_out(points[None], body[None], sim.surface)[0]
+                # One query serves the push-out's first pass and, when nothing moves, the check.
+                query = signed_distance(
+                    points[None], body[None], sim.surface, probe_below=PUSH_OUT_EPS
+                )
+                pushed = push_out(points[None], body[None], sim.surface, first=query)[0]
                 changed = np.any(pushed != points, axis=1)
                 if changed.any():
                     sim.project(pushed)
                     points = sim.points
-                    moved = float(changed.mean())
-            check = measure_frame(points, body, sim.surface, rest_lengths, edges, limits)
+                    moved, query = float(changed.mean()), None
+            check = measure_frame(points, body, sim.surface, rest_lengths, edges, limits, query)
             reasons = check.failures(limits)
             if not reasons or tries * 2 > max_substeps:
                 break
