@@ -302,3 +302,19 @@ def test_linearized_fields_agree_with_the_lookup_near_the_anchor() -> None:
             assert float(gap.max()) < worst and float(gap.mean()) < mean
     w = tangent.all_fields(near)[0]
     assert bool((w >= 0).all()) and torch.allclose(w.sum(-1), torch.ones(()), atol=1e-5)
+
+
+def test_tangent_of_one_shape_is_the_tangent_contracted_with_its_betas() -> None:
+    from usd_garment.garment.library import load_template
+
+    fields = load_body_fields()
+    anchor = torch.as_tensor(load_template("tshirt", "low").vertices)
+    gen = torch.Generator().manual_seed(1)
+    points = anchor + 4e-3 * torch.randn(2, *anchor.shape, generator=gen)
+    points[:, :5] += 0.05  # beyond the radius: the exact lookup
+    betas = torch.randn(10, generator=gen)
+    tangent = fields.linearized(anchor)
+    weights, offsets = tangent.shaped(points, betas)
+    all_weights, shape_dirs, _ = tangent.all_fields(points)
+    assert torch.allclose(weights, all_weights, atol=1e-6)
+    assert torch.allclose(offsets, torch.einsum("bnck,k->bnc", shape_dirs, betas), atol=1e-6)

@@ -43,6 +43,12 @@ def _add_rows(
     return [a.index_put((rows,), a[rows] + p) for a, p in zip(acc, parts, strict=True)]
 
 
+def _normalized(raw: torch.Tensor) -> torch.Tensor:
+    """Raw weight field values ``(..., J)`` to skinning weights: ≥ 0, rows summing to 1."""
+    w = raw.clamp_min(0.0)
+    return w / w.sum(-1, keepdim=True).clamp_min(1e-8)
+
+
 #: Central-difference step of :meth:`BodyFields.linearized` (m).
 LINEARIZATION_STEP = 2e-3
 #: Points farther than this from their anchor (m) are looked up exactly by the tangent.
@@ -138,8 +144,7 @@ class BodyFields(torch.nn.Module):
         """Diffused skinning weights ``(..., N, 24)`` at points ``(..., N, 3)``; rows are ≥ 0 and
         sum to 1."""
         (w,) = self._fields(points, ("weights",))
-        w = w.clamp_min(0.0)
-        return w / w.sum(-1, keepdim=True).clamp_min(1e-8)
+        return _normalized(w)
 
     def shape_dirs(self, points: torch.Tensor) -> torch.Tensor:
         """Diffused shape blendshapes ``(..., N, 3, 10)`` (m per unit β) at points ``(..., N, 3)``;
@@ -194,8 +199,7 @@ class BodyFields(torch.nn.Module):
     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
         """Raw field values (the groups of ``_all_names``) to weights (≥ 0, rows summing to 1),
         shape and pose blendshapes."""
-        w = values[0].clamp_min(0.0)
-        w = w / w.sum(-1, keepdim=True).clamp_min(1e-8)
+        w = _normalized(values[0])
         s = values[1].reshape(*values[1].shape[:-1], 3, NUM_BETAS)
         p = None
         if self.has_pose_dirs:
@@ -383,3 +387,30 @@ class FieldTangent:
         if bool(far.any()):
             raw[far] = torch.cat(self.fields._fields(points[far], self.fields._all_names), dim=-1)
         return self.fields._finish(list(torch.split(raw, self.sizes, dim=-1)))
+
+    def shaped(
+        self, points: torch.Tensor, betas: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Skinning weights ``(B, N, J)`` and the shape offsets B̃s(X)·β ``(B, N, 3)`` (m) of one
+        body shape ``betas`` ``(K,)`` at points ``(B, N, 3)``, to first order as
+        :meth:`all_fields` (exactly beyond ``radius``). The blendshapes are contracted with β
+        before the frames are, so a frame costs J + 3 channels instead of J + 3K.
+        """
+        n, j, k = self.anchor.shape[0], self.sizes[0], NUM_BETAS
+        shape_value = self.value[:, j : j + 3 * k].reshape(n, 3, k) @ betas  # (N, 3)
+        shape_derivative = torch.einsum(
+            "nckd,k->ncd", self.derivative[:, j : j + 3 * k].reshape(n, 3, k, 3), betas
+        )  # (N, 3, 3)
+        value = torch.cat([self.value[:, :j], shape_value], dim=-1)  # (N, J + 3)
+        derivative = torch.cat([self.derivative[:, :j], shape_derivative], dim=1)
+        planes = derivative.permute(2, 0, 1).contiguous()  # (3, N, J + 3): d/dx, d/dy, d/dz
+        delta = points - self.anchor
+        raw = torch.addcmul(value, planes[0], delta[..., 0:1])  # (B, N, J + 3)
+        for axis in (1, 2):
+            raw.addcmul_(planes[axis], delta[..., axis : axis + 1])
+        far = delta.norm(dim=-1) > self.radius
+        if bool(far.any()):
+            weights, shape_dirs = self.fields._fields(points[far], ("weights", "shape_dirs"))
+            offsets = shape_dirs.reshape(-1, 3, k) @ betas
+            raw[far] = torch.cat([weights, offsets], dim=-1)
+        return _normalized(raw[..., :j]), raw[..., j:]
