@@ -156,13 +156,8 @@ def read_smpl_motion(
     rig = np.array(
         [i if i is not None else rig_index[SMPL_PARENTS[k]] for k, i in enumerate(rig_index)]
     )
-    chain = np.einsum(
-        "ab,tjbc,tcd,de->tjae",
-        rest_axes,
-        skinning[:, rig, :3, :3],
-        skel_to_world[:, :3, :3],
-        world_to_canon[:3, :3],
-    )
+    to_canon = skel_to_world[:, None, :3, :3] @ world_to_canon[:3, :3]  # (T, 1, 3, 3)
+    chain = rest_axes @ skinning[:, rig, :3, :3] @ to_canon  # (T, 24, 3, 3)
     global_rot = np.swapaxes(_nearest_rotation(chain), -1, -2)  # column convention (T, 24, 3, 3)
     local = global_rot.copy()
     parents = np.array(SMPL_PARENTS[1:])
@@ -174,7 +169,7 @@ def read_smpl_motion(
 
     pelvis = rig_index[_J["pelvis"]]
     pelvis_rest = np.append(bind[pelvis, 3, :3], 1.0)
-    pelvis_world = np.einsum("a,tab,tbc->tc", pelvis_rest, skinning[:, pelvis], skel_to_world)
+    pelvis_world = ((pelvis_rest @ skinning[:, pelvis])[:, None] @ skel_to_world)[:, 0]
     pelvis_canon = (pelvis_world @ world_to_canon)[:, :3]
 
     prim = skel.GetPrim()
