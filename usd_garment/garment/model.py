@@ -35,6 +35,10 @@ class Articulation:
     pose_features: torch.Tensor
     transforms: torch.Tensor
 
+    def __getitem__(self, frames: slice) -> Articulation:
+        """The articulation of a range of frames."""
+        return Articulation(self.betas[frames], self.pose_features[frames], self.transforms[frames])
+
 
 @dataclass
 class GarmentOutput:

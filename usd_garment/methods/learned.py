@@ -220,11 +220,11 @@ class LearnedMethod:
             with torch.no_grad():
                 x = model.vae.decode(z[s:e])
                 tangent = self._fields.linearized(x.mean(dim=0)) if not self.exact_fields else None
+                art = garment_model.articulation(betas, pose[s:e], trans[s:e])
                 parts = []
-                for a in range(s, e, POSE_FRAMES):  # bounds the (t, N, channels) temporaries
-                    b = min(a + POSE_FRAMES, e)
-                    art = garment_model.articulation(betas, pose[a:b], trans[a:b])
-                    parts.append(garment_model.pose(x[a - s : b - s], art, tangent).vertices)
+                for a in range(0, e - s, POSE_FRAMES):  # bounds the (t, N, channels) temporaries
+                    b = slice(a, a + POSE_FRAMES)
+                    parts.append(garment_model.pose(x[b], art[b], tangent).vertices)
                 points = torch.cat(parts).numpy()
                 if surface is not None:
                     posed = body(betas, pose[s:e], trans[s:e]).vertices.numpy()
