@@ -3,6 +3,9 @@ run; a JSON and CSV table, the speed–accuracy chart and the per-frame collisio
 
 from __future__ import annotations
 
+import os
+import platform
+import sys
 import time
 from pathlib import Path
 
@@ -16,6 +19,7 @@ from usd_garment.eval.bench_plots import plot_chart, plot_collision_curves
 from usd_garment.eval.stress import LONG_FRAMES, write_stress_inputs
 from usd_garment.garment.template import GARMENT_NAMES, LODS
 from usd_garment.methods import available_methods
+from usd_garment.methods.budget import BUDGET_FILE, budget_table, save_budget
 from usd_garment.methods.learned import LEARNED_METHODS, LearnedMethod, shipped_model
 from usd_garment.methods.learned_model import load_learned_model
 from usd_garment.methods.simulation import SimulationMethod
@@ -43,9 +47,9 @@ def _methods(
     simulation_frames: int,
     simulation_lods: tuple[str, ...],
 ) -> list[BenchMethod]:
-    """The benched methods: learned ones at the level of detail they were trained on, the
-    simulation on the first ``simulation_frames`` at ``simulation_lods``, the others at every
-    one of ``lods``."""
+    """The benched methods: learned ones at the level of detail they were trained on and the
+    coarser ones of ``lods`` (carried down), the simulation on the first ``simulation_frames``
+    at ``simulation_lods``, the others at every one of ``lods``."""
     out = []
     runs: list[tuple[str, str, Path | None]] = []  # label, method, model directory
     for name in names or DEFAULT_METHODS:
@@ -62,8 +66,9 @@ def _methods(
     for label, method, path in runs:
         if path is None:
             raise click.UsageError(f"no trained model ships for the garment '{garment}'")
-        lod = load_learned_model(path).lod
-        learned.append(BenchMethod(label, method, path, lods=(lod,)))
+        trained = load_learned_model(path).lod
+        dressed = (trained, *(lod for lod in lods if LODS[lod] < LODS[trained]))
+        learned.append(BenchMethod(label, method, path, lods=dressed))
     out = learned + out
     if simulation_frames > 0 or SimulationMethod.name in names:
         frames = simulation_frames if simulation_frames > 0 else 30
@@ -79,7 +84,8 @@ def _methods(
     "--output",
     type=click.Path(file_okay=False, path_type=Path),
     required=True,
-    help="Report folder: report.json, report.csv, chart.png, collisions.png, layers/.",
+    help="Report folder: report.json, report.csv, chart.png, collisions.png, budget.json "
+    "(the error table of dress --error-budget), layers/.",
 )
 @click.option(
     "--reference",
@@ -211,7 +217,12 @@ def bench(
     with tqdm(total=runs, desc="bench", unit="run", leave=False, disable=None) as bar:
         rows = run_bench(cases, methods, output, garment=garment, on_row=lambda _: bar.update())
     wall = time.perf_counter() - started
-    write_report(rows, output, {"wall_seconds": wall, "inputs": [c.name for c in cases]})
+    source = {"wall_seconds": wall, "inputs": [c.name for c in cases]}
+    write_report(rows, output, source)
+    command = " ".join(["usd-garment", *sys.argv[1:]])
+    machine = f"{platform.machine()}, {os.cpu_count()} cores"
+    save_budget(output / BUDGET_FILE, budget_table(rows),
+                {**source, "command": command, "machine": machine})  # fmt: skip
     plot_chart(rows, output / "chart.png", f"{garment}: {len(cases)} input(s), {wall:.0f} s")
     plot_collision_curves(rows, output / "collisions.png")
     click.echo(chart_table(rows))

@@ -22,6 +22,7 @@ from usd_garment.eval.bench import (
     pareto_front,
     run_bench,
 )
+from usd_garment.methods.budget import load_budget
 from usd_garment.motion.procedural import make_motion
 from usd_garment.usd.body_layer import write_body_layer
 
@@ -80,6 +81,12 @@ def test_bench_command_writes_table_chart_and_curves(tmp_path: Path, walk: Path)
     assert len(table) == 6 and table[1].split()[0] == "simulation"
     with pytest.raises(ValueError, match="not a bench report"):
         load_report(report / "report.csv")
+    # The error table of dress --error-budget: each method x level of detail with its error.
+    budget = load_budget(report / "budget.json")
+    assert {(e.method, e.lod) for e in budget} == set(rows)
+    for e in budget:
+        assert e.error_mm == pytest.approx(float(rows[e.method, e.lod]["reference_mm"]), abs=1e-4)
+    assert "bench" in json.loads((report / "budget.json").read_text())["source"]["command"]
 
 
 def test_a_failing_method_is_a_row_not_the_end(tmp_path: Path, walk: Path) -> None:
