@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import asdict
 from pathlib import Path
 
 import click
@@ -21,6 +22,7 @@ from usd_garment.cli.options import (
 from usd_garment.dress import dress as dress_stage
 from usd_garment.garment.template import GARMENT_NAMES
 from usd_garment.methods import available_methods
+from usd_garment.methods.budget import pick_for_budget
 from usd_garment.methods.learned import (
     LEARNED_METHODS,
     LearnedMethod,
@@ -82,6 +84,16 @@ QUALITY_LODS = {"draft": "low", "final": "high"}
     "slower); instead of --lod.",
 )
 @click.option(
+    "--error-budget",
+    "error_budget",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=None,
+    metavar="MM",
+    help="Pick the fastest method and level of detail whose mean error against the simulation, "
+    "measured on held-out motion (the model's budget.json, written by 'usd-garment bench'), is "
+    "at most MM millimetres; instead of --method, --lod and --quality.",
+)
+@click.option(
     "--proxy",
     "proxy_lod",
     type=click.Choice(("medium", "low")),
@@ -103,11 +115,25 @@ def dress(
     betas: str | None,
     root_layer: Path | None,
     quality: str | None,
+    error_budget: float | None,
     proxy_lod: str | None,
     as_json: bool,
 ) -> None:
     """Dress the animated SMPL body of INPUT; write the garment layer to OUTPUT."""
     frame_range, beta_values = parse_frames(frames), parse_betas(betas)
+    picked = None
+    if error_budget is not None:
+        context = click.get_current_context()
+        for name in ("lod", "quality", "method"):
+            if context.get_parameter_source(name) is not click.core.ParameterSource.DEFAULT:
+                raise click.BadParameter(
+                    f"give --error-budget or --{name}, not both", param_hint="--error-budget"
+                )
+        with user_errors():
+            picked = pick_for_budget(garment, model, error_budget)
+        method, lod = picked.method, picked.lod
+        if method not in LEARNED_METHODS:
+            model = None  # the model directory only held the table
     if quality is not None:
         source = click.get_current_context().get_parameter_source("lod")
         if source is not click.core.ParameterSource.DEFAULT:
@@ -141,8 +167,17 @@ def dress(
             progress=bar.progress,
         )
     if as_json:
-        click.echo(json.dumps(result.to_json(), indent=2))
+        out = result.to_json()
+        if picked is not None:
+            out["error_budget"] = {"budget_mm": error_budget, **asdict(picked)}
+        click.echo(json.dumps(out, indent=2))
         return
+    if picked is not None:
+        click.echo(
+            f"error budget {error_budget:g} mm: {picked.method} at {picked.lod} "
+            f"({picked.error_mm:.1f} mm on held-out motion, {picked.frames_per_second:.0f} "
+            "frames/s on the bench)"
+        )
     s = result.seconds
     click.echo(
         f"{result.garment} ({result.method}): {result.frames} frames × {result.vertices} vertices "

@@ -157,3 +157,43 @@ def test_quality_picks_the_level_of_detail(body_layer: Path, tmp_path: Path) -> 
     both = CliRunner().invoke(main, ["dress", str(body_layer), "-o", str(tmp_path / "x.usdc"),
                                      "--quality", "final", "--lod", "low"])  # fmt: skip
     assert both.exit_code == 2 and "give --quality or --lod, not both" in both.output
+
+
+def test_error_budget_picks_the_fastest_method_that_meets_it(
+    body_layer: Path, tmp_path: Path
+) -> None:
+    from usd_garment.methods.budget import BUDGET_FILE, BudgetEntry, save_budget
+    from usd_garment.methods.learned import shipped_model
+
+    model = tmp_path / "model"
+    shutil.copytree(shipped_model("tshirt"), model)
+    table = [  # method, lod, error mm, inside elsewhere, frames/s (as a bench would measure)
+        BudgetEntry("learned", "high", 16.9, 0.008, 400.0),
+        BudgetEntry("learned", "low", 17.2, 0.009, 700.0),
+        BudgetEntry("lbs", "low", 38.0, 0.013, 900.0),
+        BudgetEntry("lbs+postprocess", "high", 37.8, 0.0, 7.0),
+    ]
+    save_budget(model / BUDGET_FILE, table, {"command": "test"})
+    picks = ((20, "learned", "low"), (50, "lbs", "low"), (17, "learned", "high"))
+    for budget, method, lod in picks:
+        out = tmp_path / f"b{budget}.usdc"
+        code, stdout, _ = _run(["dress", body_layer, "-o", out, "--model", model,
+                                "--error-budget", budget, "--json"])  # fmt: skip
+        assert code == 0, stdout
+        summary = json.loads(stdout)
+        assert (summary["method"], summary["error_budget"]["lod"]) == (method, lod)
+        assert summary["vertices"] == len(load_template("tshirt", lod).vertices)
+    message = _assert_clean_failure(
+        ["dress", body_layer, "-o", tmp_path / "b5.usdc", "--model", model, "--error-budget", 5],
+        tmp_path, body_layer,
+    )  # fmt: skip
+    assert "no method meets an error of 5 mm" in message and "learned at high, 16.9 mm" in message
+    both = _run(["dress", body_layer, "-o", tmp_path / "x.usdc", "--error-budget", 20, "--lod",
+                 "low"])  # fmt: skip
+    assert both[0] == 2 and "give --error-budget or --lod, not both" in both[1] + both[2]
+    (model / BUDGET_FILE).unlink()
+    message = _assert_clean_failure(
+        ["dress", body_layer, "-o", tmp_path / "b.usdc", "--model", model, "--error-budget", 20],
+        tmp_path, body_layer,
+    )  # fmt: skip
+    assert "no error table" in message

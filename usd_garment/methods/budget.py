@@ -20,6 +20,7 @@ from typing import Any
 from usd_garment.atomic import atomic_output
 from usd_garment.eval.bench import REFERENCE_LABEL, BenchRow, chart_points
 from usd_garment.methods import available_methods
+from usd_garment.methods.learned import shipped_model
 
 #: The table's file name, in a bench report folder and in a model directory.
 BUDGET_FILE = "budget.json"
@@ -110,3 +111,16 @@ def pick(entries: Sequence[BudgetEntry], error_mm: float) -> BudgetEntry:
             f"accurate: {best.method} at {best.lod}, {best.error_mm:.1f} mm)"
         )
     return max(meeting, key=lambda e: e.frames_per_second)
+
+
+def pick_for_budget(garment: str, model: str | Path | None, error_mm: float) -> BudgetEntry:
+    """:func:`pick` from the table of ``model`` (a model directory; None: the shipped model of
+    ``garment``).
+
+    Raises:
+        BudgetError: no model, no table, or nothing meets the budget.
+    """
+    folder = Path(model) if model is not None else shipped_model(garment)
+    if folder is None:
+        raise BudgetError(f"no model ships for the garment '{garment}', so no error table")
+    return pick(load_budget(folder / BUDGET_FILE), error_mm)
