@@ -101,6 +101,12 @@ QUALITY_LODS = {"draft": "low", "final": "high"}
     help="Also write a decimated proxy-purpose mesh of the garment at this level of detail "
     "(its points carried from the computed garment; viewports draw it, renders the full one).",
 )
+@click.option(
+    "--lod-variants",
+    is_flag=True,
+    help="Write the garment as a 'lod' variant set: the computed level of detail (selected) and "
+    "each coarser one, carried from it, for a viewer or a pipeline to switch.",
+)
 @json_option()
 def dress(
     input_path: Path,
@@ -117,6 +123,7 @@ def dress(
     quality: str | None,
     error_budget: float | None,
     proxy_lod: str | None,
+    lod_variants: bool,
     as_json: bool,
 ) -> None:
     """Dress the animated SMPL body of INPUT; write the garment layer to OUTPUT."""
@@ -163,6 +170,7 @@ def dress(
             betas=beta_values,
             root_layer=root_layer,
             proxy_lod=proxy_lod,
+            lod_variants=lod_variants,
             on_read=bar.on_read,
             progress=bar.progress,
         )

@@ -313,3 +313,38 @@ def test_proxy_mesh_is_the_garment_carried_to_a_lower_lod(
     np.testing.assert_allclose(local, carried, atol=1e-5)
     bad = CliRunner().invoke(main, [*args[:-1], "low", "--proxy", "low"])
     assert bad.exit_code == 1 and "lower level of detail" in bad.output
+
+
+@pytest.mark.parametrize("clip_threshold", [1, garment_layer.CLIP_THRESHOLD])
+def test_lod_variant_set_holds_every_coarser_level(
+    tmp_path: Path, amass_layer: Path, clip_threshold: int
+) -> None:
+    from usd_garment.garment.library import load_template
+    from usd_garment.garment.lod import carry_to_lod
+
+    out = tmp_path / "g.usdc"
+    dress(amass_layer, out, method="lbs", lod="medium", lod_variants=True, proxy_lod="low",
+          clip_threshold=clip_threshold)  # fmt: skip
+    points, _, info = read_garment_layer(out)  # the default variant: the computed level
+    assert points.shape[1] == len(load_template("tshirt", "medium").vertices)
+    assert validate_layer(out) == []
+    stage = Usd.Stage.Open(str(out))
+    garment = stage.GetPrimAtPath(info.mesh)
+    variants = garment.GetVariantSet("lod")
+    assert sorted(variants.GetVariantNames()) == ["low", "medium"]
+    assert variants.GetVariantSelection() == "medium"
+    variants.SetVariantSelection("low")  # (edits the session's root layer, not the file)
+    mesh = UsdGeom.Mesh(garment)
+    low = load_template("tshirt", "low")
+    assert len(mesh.GetFaceVertexCountsAttr().Get()) == len(low.faces)
+    local = np.stack([np.asarray(mesh.GetPointsAttr().Get(t)) for t in info.time_codes.tolist()])
+    m = info.canonical_to_local
+    carried = carry_to_lod(points, "tshirt", "medium", "low") @ m[:3, :3] + m[3, :3]
+    np.testing.assert_allclose(local, carried, atol=1e-5)
+    normals = np.asarray(mesh.GetNormalsAttr().Get(info.time_codes[-1]))
+    assert normals.shape == (len(low.vertices), 3)
+    assert UsdGeom.Imageable(garment).GetProxyPrimRel().GetTargets() == [
+        stage.GetPrimAtPath(info.mesh + "_proxy").GetPath()
+    ]
+    with pytest.raises(ValueError, match="level of detail below 'low'"):
+        dress(amass_layer, tmp_path / "x.usdc", method="lbs", lod="low", lod_variants=True)

@@ -79,6 +79,7 @@ def dress(
     clip_threshold: int = CLIP_THRESHOLD,
     frames_per_chunk: int = FRAMES_PER_CHUNK,
     proxy_lod: str | None = None,
+    lod_variants: bool = False,
     on_read: Callable[[int], None] | None = None,
     progress: Callable[[int], None] | None = None,
 ) -> DressResult:
@@ -100,6 +101,8 @@ def dress(
         proxy_lod: also write a proxy-purpose mesh ``<garment>_proxy`` at this (lower) level
             of detail, its points carried from the computed garment; the garment then has the
             render purpose and a ``proxyPrim`` to it.
+        lod_variants: write the garment as a ``lod`` variant set: the computed level of detail
+            (the default selection) and each coarser one, their points carried from it.
         frames_per_chunk: frames computed and written at once; with value clips, memory stays
             bounded by a chunk and a clip whatever the length (methods that pose the whole
             sequence at once, the simulation, hold all of it).
@@ -124,12 +127,21 @@ def dress(
     motion, info = read_smpl_motion(input_path, body, skeleton, frames, betas)
     if template is None:
         template = load_template(garment, lod=lod, body_model_path=body_model)
+    variants = []  # coarser levels of detail carried from the computed one
+    if lod_variants:
+        coarser = [k for k in LODS if LODS[k] < LODS[template.lod]]  # finest first
+        if not coarser:
+            raise ValueError(f"a lod variant set needs a level of detail below '{template.lod}'")
+        variants = [
+            load_template(template.name, lod=k, body_model_path=body_model) for k in coarser
+        ]
     proxy = None
     if proxy_lod is not None:
         if proxy_lod not in LODS or LODS[proxy_lod] >= LODS[template.lod]:
             raise ValueError(f"the proxy must be a lower level of detail than '{template.lod}'")
         proxy = load_template(template.name, lod=proxy_lod, body_model_path=body_model)
-        weights = transfer_weights(template, proxy)
+    carried = variants + ([proxy] if proxy is not None else [])
+    weights = [transfer_weights(template, other) for other in carried]
     seconds["read"] = time.perf_counter() - start
     if on_read is not None:
         on_read(motion.num_frames)
@@ -146,18 +158,20 @@ def dress(
                 break
             start = time.perf_counter()
             if writer is None:  # after the first chunk: a learned method knows its version
-                garments = [_garment_frames(template, garment_method, body.name)]
+                garments = [_garment_frames(t, garment_method, body.name)
+                            for t in [template, *carried]]  # fmt: skip
+                for g, t in zip(garments[: 1 + len(variants)], [template, *variants], strict=True):
+                    g.name, g.variant = template.name, t.lod if variants else ""
+                    g.purpose = "render" if proxy is not None else ""
                 if proxy is not None:
-                    garments[0].purpose = "render"
-                    garments.append(_garment_frames(proxy, garment_method, body.name))
-                    garments[1].name, garments[1].purpose = f"{template.name}_proxy", "proxy"
+                    garments[-1].name, garments[-1].purpose = f"{template.name}_proxy", "proxy"
                 writer = stack.enter_context(
                     GarmentLayerWriter(
                         output, info, garments, motion.time_codes, clip_threshold=clip_threshold,
                         root_layer=root,
                     )
                 )  # fmt: skip
-            writer.add([points] if proxy is None else [points, carry(points, weights)])
+            writer.add([points, *(carry(points, w) for w in weights)])
             seconds["write"] += time.perf_counter() - start
         start = time.perf_counter()
     seconds["write"] += time.perf_counter() - start  # the files renamed into place

@@ -42,6 +42,8 @@ LAYER_SUFFIXES = (".usdc", ".usda", ".usd")
 #: customData key on each mesh: the matrix taking canonical points to the mesh's local space.
 CANONICAL_TO_LOCAL_KEY = "usdGarment:canonicalToLocal"
 GARMENT_SCOPE = "Garments"
+#: The variant set that holds levels of detail of one garment.
+LOD_VARIANT_SET = "lod"
 #: File names inside the value-clip folder.
 TOPOLOGY_NAME, MANIFEST_NAME, CLIP_NAME = "topology.usdc", "manifest.usda", "clip_{:04d}.usdc"
 
@@ -64,6 +66,9 @@ class GarmentFrames:
         purpose: the mesh's ``UsdGeom`` purpose ("render", "proxy"; empty: not authored). A
             "render" garment named ``X`` gets a ``proxyPrim`` relationship to a "proxy" garment
             named ``X_proxy`` written beside it.
+        variant: a variant of the ``lod`` variant set (empty: none). Garments that share a
+            name and differ in variant are one mesh prim whose variants hold each one's
+            topology and samples; the first one listed is the default selection.
     """
 
     name: str
@@ -77,6 +82,7 @@ class GarmentFrames:
     body_model: str
     solver_settings: str = ""
     purpose: str = ""
+    variant: str = ""
 
 
 def garment_parent_path(info: StageInfo) -> Sdf.Path:
@@ -143,16 +149,40 @@ def _define_hierarchy(
     return spec
 
 
+def _mesh_spec(
+    layer: Sdf.Layer, parent: Sdf.Path, garment: GarmentFrames, existing: set[str], define: bool
+) -> Sdf.PrimSpec:
+    """The spec that holds one garment's mesh data in ``layer``: the mesh prim's, or that of its
+    ``lod`` variant (the set made, and its first variant selected, on first use)."""
+    spec = _define_hierarchy(layer, parent.AppendChild(garment.name), existing, define)
+    if not garment.variant:
+        return spec
+    if LOD_VARIANT_SET not in spec.variantSets:
+        Sdf.VariantSetSpec(spec, LOD_VARIANT_SET)
+        spec.variantSetNameList.prependedItems = [LOD_VARIANT_SET]
+        spec.variantSelections[LOD_VARIANT_SET] = garment.variant
+    variants = spec.variantSets[LOD_VARIANT_SET]
+    if garment.variant not in variants.variants:
+        Sdf.VariantSpec(variants, garment.variant)
+    return variants.variants[garment.variant].primSpec
+
+
+def _sample_path(parent: Sdf.Path, garment: GarmentFrames, in_clip: bool) -> Sdf.Path:
+    """Where a garment's time samples go: its mesh (or ``lod`` variant) in the layer itself; in
+    value-clip files, a prim of its own per variant (clip files are not composed, so a variant's
+    samples need a path that the other variants' do not share)."""
+    mesh = parent.AppendChild(garment.name)
+    if not garment.variant:
+        return mesh
+    if in_clip:
+        return parent.AppendChild(f"{garment.name}_{LOD_VARIANT_SET}_{garment.variant}")
+    return mesh.AppendVariantSelection(LOD_VARIANT_SET, garment.variant)
+
+
 def _author_static(
-    layer: Sdf.Layer,
-    mesh_path: Sdf.Path,
-    garment: GarmentFrames,
-    faces: np.ndarray,
-    canonical_to_local: np.ndarray,
-    existing: set[str],
+    spec: Sdf.PrimSpec, garment: GarmentFrames, faces: np.ndarray, canonical_to_local: np.ndarray
 ) -> None:
-    """Topology, UVs, render settings and the canonical-frame record of one mesh."""
-    spec = _define_hierarchy(layer, mesh_path, existing, define=True)
+    """Topology, UVs, render settings and the canonical-frame record of one mesh (or variant)."""
     counts = np.full(len(faces), 3, dtype=np.int32)
     _set(spec, "faceVertexCounts", Sdf.ValueTypeNames.IntArray, Vt.IntArray.FromNumpy(counts))
     indices = np.ascontiguousarray(faces.reshape(-1), dtype=np.int32)
@@ -173,10 +203,18 @@ def _author_static(
     )
 
 
+def _one_per_mesh(garments: list[GarmentFrames]) -> list[GarmentFrames]:
+    """The first garment of each mesh prim (the default variant where there are variants)."""
+    first: dict[str, GarmentFrames] = {}
+    for garment in garments:
+        first.setdefault(garment.name, garment)
+    return list(first.values())
+
+
 def _link_proxies(layer: Sdf.Layer, parent: Sdf.Path, garments: list[GarmentFrames]) -> None:
     """``proxyPrim`` from each "render" garment ``X`` to the "proxy" garment ``X_proxy``."""
     proxies = {g.name for g in garments if g.purpose == "proxy"}
-    for garment in garments:
+    for garment in _one_per_mesh(garments):
         if garment.purpose == "render" and f"{garment.name}_proxy" in proxies:
             spec = layer.GetPrimAtPath(parent.AppendChild(garment.name))
             rel = Sdf.RelationshipSpec(spec, "proxyPrim", custom=False)
@@ -189,7 +227,7 @@ def _apply_garment_api(
     """``GarmentAPI`` with its values on every mesh of ``layer``; ``garment:body`` targets the
     skeleton."""
     stage = Usd.Stage.Open(layer)
-    for garment in garments:
+    for garment in _one_per_mesh(garments):
         apply_garment(
             stage.GetPrimAtPath(parent.AppendChild(garment.name)),
             garment_type=garment.garment_type,
@@ -383,11 +421,8 @@ class GarmentLayerWriter:
         self.topology = _new_layer(info, self.default_prim) if self.use_clips else self.main
         with Sdf.ChangeBlock():
             for garment, faces in zip(garments, self.faces, strict=True):
-                mesh_path = self.parent.AppendChild(garment.name)
-                _author_static(
-                    self.topology, mesh_path, garment, faces, self.canonical_to_local,
-                    self.existing,
-                )  # fmt: skip
+                spec = _mesh_spec(self.topology, self.parent, garment, self.existing, define=True)
+                _author_static(spec, garment, faces, self.canonical_to_local)
             _link_proxies(self.topology, self.parent, garments)
         _apply_garment_api(self.topology, self.parent, garments, info)
         self.outputs: list[Path] = []
@@ -434,8 +469,8 @@ class GarmentLayerWriter:
         with Sdf.ChangeBlock():
             for garment, faces, pending in zip(self.garments, self.faces, self._pending,
                                                strict=True):  # fmt: skip
-                mesh_path = self.parent.AppendChild(garment.name)
-                _author_samples(layer, mesh_path, pending[:frames], faces, codes)
+                path = _sample_path(self.parent, garment, in_clip=self.use_clips)
+                _author_samples(layer, path, pending[:frames], faces, codes)
         keep = frames - 1 if self.use_clips else frames  # clips overlap by one frame
         self._pending = [p[keep:] for p in self._pending]
         self._start += keep
@@ -512,9 +547,9 @@ def _author_clips(
         "manifestAssetPath": Sdf.AssetPath(f"./{folder}/{MANIFEST_NAME}"),
     }
     for garment in garments:
-        mesh_path = parent.AppendChild(garment.name)
-        spec = _define_hierarchy(main, mesh_path, existing, define=True)
-        spec.SetInfo("clips", {"default": {**clips, "primPath": str(mesh_path)}})
+        spec = _mesh_spec(main, parent, garment, existing, define=True)
+        source = _sample_path(parent, garment, in_clip=True)
+        spec.SetInfo("clips", {"default": {**clips, "primPath": str(source)}})
 
 
 def _oriented_faces(garment: GarmentFrames, mirrored: bool) -> np.ndarray:
@@ -534,7 +569,8 @@ def _manifest(
     """The clip manifest: which attributes of which meshes the clips animate."""
     layer = _new_layer(info, default_prim)
     for garment in garments:
-        spec = _define_hierarchy(layer, parent.AppendChild(garment.name), set(), define=False)
+        path = _sample_path(parent, garment, in_clip=True)
+        spec = _define_hierarchy(layer, path, set(), define=False)
         Sdf.AttributeSpec(spec, "points", Sdf.ValueTypeNames.Point3fArray)
         Sdf.AttributeSpec(spec, "normals", Sdf.ValueTypeNames.Normal3fArray)
         Sdf.AttributeSpec(spec, "extent", Sdf.ValueTypeNames.Float3Array)
