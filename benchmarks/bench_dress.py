@@ -1,6 +1,7 @@
 """Benchmark of the stage processor on a 1,000-frame 30 fps procedural animation: ``dress`` with
 the default method (the learned one where a model ships) and with ``lbs``, in-process (read,
-compute, write) and once through the CLI (with interpreter start); ``learned+postprocess``
+compute, write; the learned method's stages in ms per frame: model loading, pose code and GRU,
+decoder, fields, posing) and once through the CLI (with interpreter start); ``learned+postprocess``
 (``dress --quality final``), ``lbs+postprocess`` and the physics simulation on slices of the
 same animation; the ratios between them.
 
@@ -23,7 +24,8 @@ import torch
 
 from usd_garment.body import load_body_model
 from usd_garment.dress import dress
-from usd_garment.methods.learned import default_method
+from usd_garment.methods import get_method
+from usd_garment.methods.learned import LearnedMethod, default_method
 from usd_garment.motion.amass import load_amass
 from usd_garment.usd.body_layer import write_body_layer
 
@@ -52,6 +54,14 @@ def report(label: str, summary: dict) -> float:
     return fps
 
 
+def per_frame(stages: dict[str, float], summary: dict) -> None:
+    """The learned method's stages and the processor's read and write in ms per frame."""
+    frames = summary["frames"]
+    times = {**{k: v for k, v in stages.items() if v > 0}, "read": summary["seconds"]["read"],
+             "write (normals, extents, USD)": summary["seconds"]["write"]}  # fmt: skip
+    print("  ms per frame: " + ", ".join(f"{k} {1e3 * v / frames:.3f}" for k, v in times.items()))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=1000)
@@ -71,8 +81,11 @@ def main() -> None:
         default = default_method("tshirt", "high")
         runs = {}
         for method in dict.fromkeys((default, "lbs")):
-            runs[method] = dress(body_usd, folder / f"{method}.usdc", method=method).to_json()
+            instance = get_method(method)
+            runs[method] = dress(body_usd, folder / f"{method}.usdc", method=instance).to_json()
             report(f"{method} (in-process)", runs[method])
+            if isinstance(instance, LearnedMethod):
+                per_frame(instance.seconds, runs[method])
         start = time.perf_counter()
         cli = subprocess.run(
             [str(Path(sys.executable).with_name("usd-garment")), "dress", str(body_usd),

@@ -183,3 +183,20 @@ def test_draft_carries_the_shipped_model_down(body_model: BodyModel, synthetic_b
     assert code == 0, output
     high = read_garment_layer(tmp_path / "high.usdc")[0]
     np.testing.assert_allclose(draft, carry_to_lod(high, "tshirt", "high", "low"), atol=1e-5)
+
+
+def test_learned_method_times_its_stages(body_model: BodyModel, synthetic_body: BodyModel,
+                                         tmp_path: Path) -> None:  # fmt: skip
+    """The per-stage seconds that ``benchmarks/bench_dress.py`` reports in ms per frame."""
+    from usd_garment.dress import dress
+    from usd_garment.methods.learned import STAGES, LearnedMethod
+
+    if body_model is synthetic_body:
+        pytest.skip("needs the embedded default body and its fields")
+    body = tmp_path / "walk.usda"
+    write_body_layer(body, make_motion("walk", 6, 30.0, seed=4, body=body_model), body_model)
+    method = LearnedMethod()
+    dress(body, tmp_path / "g.usdc", method=method, lod="low")
+    assert set(method.seconds) == set(STAGES)
+    ran = {k for k, v in method.seconds.items() if v > 0}
+    assert ran == {"load", "regressor", "decoder", "fields", "posing", "carry"}

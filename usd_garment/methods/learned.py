@@ -12,6 +12,7 @@ GRU's recurrence.
 from __future__ import annotations
 
 import json
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -37,6 +38,8 @@ SHIPPED_MODELS = Path(__file__).resolve().parent.parent / "data" / "models"
 FRAMES_PER_CHUNK = 256
 #: Frames posed at once within a chunk (bounds memory: ~N·(3 + 24 + 30) floats per frame).
 POSE_FRAMES = 64
+#: The stages :attr:`LearnedMethod.seconds` times.
+STAGES = ("load", "regressor", "decoder", "fields", "posing", "carry", "push_out")
 
 
 def shipped_model(garment: str, lod: str | None = None) -> Path | None:
@@ -119,6 +122,10 @@ class LearnedMethod:
         self.exact_fields = exact_fields
         self._model: LearnedModel | None = None
         self._fields = fields
+        #: Seconds spent by the last :meth:`predict_stream` in each stage (the model's and the
+        #: fields' loading, the pose code and GRU, the decoder, the fields' linearization, the
+        #: posing, the carry to a coarser mesh and the push-out).
+        self.seconds: dict[str, float] = {}
 
     @property
     def version(self) -> str:
@@ -196,6 +203,14 @@ class LearnedMethod:
             ModelError: no usable model, or one trained on another template (or a coarser
                 level of detail than ``template``'s).
         """
+        self.seconds = dict.fromkeys(STAGES, 0.0)
+        clock = [time.perf_counter()]
+
+        def lap(stage: str) -> None:
+            now = time.perf_counter()
+            self.seconds[stage] += now - clock[0]
+            clock[0] = now
+
         model = self.load(template.name, body)
         carried = template.lod != model.lod and _dresses(model.lod, template.lod)
         if len(template.vertices) != model.vertices and not carried:
@@ -212,27 +227,35 @@ class LearnedMethod:
         pose = torch.as_tensor(motion.pose, dtype=torch.float32)
         trans = torch.as_tensor(motion.trans, dtype=torch.float32)
         t_frames = motion.num_frames
+        lap("load")
         with torch.no_grad():
             gamma, _ = describe_motion(motion, model.pose_codec)
             z = to_frames(model.regressor.predict(gamma, betas), motion.fps, t_frames)
+        lap("regressor")
         for s in range(0, t_frames, chunk):
             e = min(s + chunk, t_frames)
             with torch.no_grad():
                 x = model.vae.decode(z[s:e])
+                lap("decoder")
                 tangent = self._fields.linearized(x.mean(dim=0)) if not self.exact_fields else None
+                lap("fields")
                 art = garment_model.articulation(betas, pose[s:e], trans[s:e])
                 parts = []
                 for a in range(0, e - s, POSE_FRAMES):  # bounds the (t, N, channels) temporaries
                     b = slice(a, a + POSE_FRAMES)
                     parts.append(garment_model.pose(x[b], art[b], tangent).vertices)
                 points = torch.cat(parts).numpy()
-                if surface is not None:
-                    posed = body(betas, pose[s:e], trans[s:e]).vertices.numpy()
+                lap("posing")
             if carried:
                 points = carry_to_lod(points, template.name, model.lod, template.lod)
+                lap("carry")
             if surface is not None:
+                with torch.no_grad():
+                    posed = body(betas, pose[s:e], trans[s:e]).vertices.numpy()
                 points = push_out(points, posed, surface)
+                lap("push_out")
             yield points
+            clock[0] = time.perf_counter()  # the consumer's time (writing) is not ours
 
 
 class LearnedPushOutMethod(LearnedMethod):
