@@ -14,6 +14,7 @@ Shapes: T frames, N query points, V body vertices, F body faces. Units: metres.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import igl
@@ -50,6 +51,12 @@ class BodyDistance:
     closest: np.ndarray
     normal: np.ndarray
     closest_inside: np.ndarray
+
+    def frames(self, a: int, b: int) -> BodyDistance:
+        """The result for frames ``a .. b-1``."""
+        return BodyDistance(
+            self.distance[a:b], self.closest[a:b], self.normal[a:b], self.closest_inside[a:b]
+        )
 
     @property
     def inside(self) -> np.ndarray:
@@ -175,17 +182,32 @@ def _closest_on_triangles(
     return best, code
 
 
-def winding_numbers(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Generalized winding numbers ``(M,)`` of ``points`` ``(M, 3)`` (m) against the triangle
-    mesh ``vertices`` ``(V, 3)`` (m), ``faces`` ``(F, 3)``: ~1 inside, ~0 outside, ~2 where two
-    parts overlap (libigl's fast winding number)."""
-    if len(points) == 0:
-        return np.zeros(0)
-    return igl.fast_winding_number(
+def winding_tree(vertices: np.ndarray, faces: np.ndarray) -> igl.FastWindingNumberBVH:
+    """libigl's fast-winding-number hierarchy of the triangle mesh ``vertices`` ``(V, 3)`` (m),
+    ``faces`` ``(F, 3)``, built once for several queries (its build is most of a query's cost;
+    about 5 MB for the body)."""
+    tree = igl.FastWindingNumberBVH()
+    tree.init(
         np.ascontiguousarray(vertices, dtype=np.float64),
         np.ascontiguousarray(faces, dtype=np.int64),
-        np.ascontiguousarray(points, dtype=np.float64),
     )
+    return tree
+
+
+def tree_winding_numbers(tree: igl.FastWindingNumberBVH, points: np.ndarray) -> np.ndarray:
+    """Generalized winding numbers ``(M,)`` of ``points`` ``(M, 3)`` (m) against the mesh of
+    ``tree``: ~1 inside, ~0 outside, ~2 where two parts overlap."""
+    if len(points) == 0:
+        return np.zeros(0)
+    return tree.winding_number(np.ascontiguousarray(points, dtype=np.float64))
+
+
+def winding_numbers(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """:func:`tree_winding_numbers` against the triangle mesh ``vertices`` ``(V, 3)`` (m),
+    ``faces`` ``(F, 3)`` (libigl's fast winding number)."""
+    if len(points) == 0:
+        return np.zeros(0)
+    return tree_winding_numbers(winding_tree(vertices, faces), points)
 
 
 def signed_distance(
@@ -194,13 +216,16 @@ def signed_distance(
     surface: BodySurface,
     nearest: int = NEAREST_FACES,
     probe_below: float = 0.0,
+    trees: Sequence[igl.FastWindingNumberBVH] | None = None,
 ) -> BodyDistance:
     """Signed distance of ``points`` ``(T, N, 3)`` to the body ``(T, V, 3)``, frame by frame.
 
     The closest point is searched among the ``nearest`` triangles whose centroids are nearest
     (a k-d tree per frame), in float32; the sign is the winding-number inside test. Where the
     signed distance is below ``probe_below`` (m; 0: the inside points only), the closest point
-    is probed ``FORCED_PROBE`` outside its surface for lying inside the body.
+    is probed ``FORCED_PROBE`` outside its surface for lying inside the body. ``trees``: the
+    winding-number hierarchy of each frame's body (:func:`winding_tree`), when the caller
+    queries the same frames again; None: built here, one per frame.
     """
     pts = torch.as_tensor(points).float()
     verts = torch.as_tensor(body_vertices).float()
@@ -241,11 +266,11 @@ def signed_distance(
     faces = surface.faces.numpy()
     closest_inside = np.zeros((t_frames, n), dtype=bool)
     for t in range(t_frames):
-        body = verts[t].numpy()
-        inside = winding_numbers(pts[t].numpy(), body, faces) > WINDING_INSIDE
+        tree = trees[t] if trees is not None else winding_tree(verts[t].numpy(), faces)
+        inside = tree_winding_numbers(tree, pts[t].numpy()) > WINDING_INSIDE
         dist[t] = np.where(inside, -dist[t], dist[t])
         probe = np.flatnonzero(dist[t] < probe_below)
         if probe.size:
             at = closest[t, probe] + FORCED_PROBE * normal[t, probe]
-            closest_inside[t, probe] = winding_numbers(at, body, faces) > WINDING_INSIDE
+            closest_inside[t, probe] = tree_winding_numbers(tree, at) > WINDING_INSIDE
     return BodyDistance(dist, closest, normal, closest_inside)
