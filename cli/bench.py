@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import os
 import platform
-import sys
 import time
 from pathlib import Path
 
@@ -75,6 +74,13 @@ def _methods(
         out.append(BenchMethod(SimulationMethod.name, SimulationMethod.name,
                                lods=simulation_lods, frames=frames))  # fmt: skip
     return out
+
+
+def _plain(value: object) -> object:
+    """A command-line value as JSON (paths as strings, tuples as lists)."""
+    if isinstance(value, tuple | list):
+        return [_plain(v) for v in value]
+    return str(value) if isinstance(value, Path) else value
 
 
 @click.command("bench")
@@ -219,10 +225,12 @@ def bench(
     wall = time.perf_counter() - started
     source = {"wall_seconds": wall, "inputs": [c.name for c in cases]}
     write_report(rows, output, source)
-    command = " ".join(["usd-garment", *sys.argv[1:]])
+    context = click.get_current_context()
+    options = {k: _plain(v) for k, v in context.params.items()}
     machine = f"{platform.machine()}, {os.cpu_count()} cores"
     save_budget(output / BUDGET_FILE, budget_table(rows),
-                {**source, "command": command, "machine": machine})  # fmt: skip
+                {**source, "command": context.command_path, "options": options,
+                 "machine": machine})  # fmt: skip
     plot_chart(rows, output / "chart.png", f"{garment}: {len(cases)} input(s), {wall:.0f} s")
     plot_collision_curves(rows, output / "collisions.png")
     click.echo(chart_table(rows))

@@ -86,7 +86,8 @@ def test_bench_command_writes_table_chart_and_curves(tmp_path: Path, walk: Path)
     assert {(e.method, e.lod) for e in budget} == set(rows)
     for e in budget:
         assert e.error_mm == pytest.approx(float(rows[e.method, e.lod]["reference_mm"]), abs=1e-4)
-    assert "bench" in json.loads((report / "budget.json").read_text())["source"]["command"]
+    source = json.loads((report / "budget.json").read_text())["source"]
+    assert source["command"].endswith("bench") and source["options"]["lods"] == ["low", "medium"]
 
 
 def test_a_failing_method_is_a_row_not_the_end(tmp_path: Path, walk: Path) -> None:
