@@ -114,8 +114,8 @@ class SparseGrid(torch.nn.Module):
         self.spacing = float(spacing)
         self.shape: tuple[int, int, int] = tuple(int(s) for s in mask.shape)  # type: ignore[assignment]
         self.names = tuple(channels)
-        index = np.full(flat.size, -1, dtype=np.int64)
-        index[flat] = np.arange(count)
+        index = np.full(flat.size, -1, dtype=np.int32)  # half the memory of int64 to fill
+        index[flat] = np.arange(count, dtype=np.int32)
         self.register_buffer("origin", torch.as_tensor(origin, dtype=torch.float32))
         self.register_buffer("index", torch.from_numpy(index).to(mask.device))
         self._inner: torch.Tensor | None = None  # made by the first blended lookup
