@@ -79,3 +79,21 @@ def test_forced_and_elsewhere_split(
     query = signed_distance(point[None, None], verts[:1], BodySurface(faces, verts.shape[1]))
     assert query.inside[0, 0] and query.elsewhere[0, 0] and not query.forced[0, 0]
     assert query.distance[0, 0] == pytest.approx(-0.02, abs=3e-3)
+
+
+def test_push_out_is_the_same_frame_by_frame(
+    body_model: BodyModel, arms_down: tuple[np.ndarray, np.ndarray], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The push-out shares one winding-number hierarchy per body frame across its queries, a
+    group of frames at a time; the groups (and a first query made by the caller) change
+    nothing."""
+    from usd_garment.eval import push_out as module
+
+    verts, points = arms_down
+    surface = BodySurface(body_model.faces.numpy(), verts.shape[1])
+    whole = module.push_out(points, verts, surface)
+    first = signed_distance(points, verts, surface, probe_below=module.PUSH_OUT_EPS)
+    monkeypatch.setattr(module, "TREE_FRAMES", 1)
+    np.testing.assert_array_equal(module.push_out(points, verts, surface, first=first), whole)
+    assert (np.abs(whole - points).max(-1) > 0).sum() > 100  # it did move points
+    assert not signed_distance(whole, verts, surface, probe_below=1e-3).elsewhere.any()
