@@ -98,8 +98,11 @@ class GarmentModel(torch.nn.Module):
         ``tangent``: the fields to first order about points near ``x`` (inference: one set of
         lookups per chunk of frames instead of one per frame); None: looked up at ``x``.
         """
-        one_shape = bool((art.betas == art.betas[:1]).all())
-        if tangent is not None and one_shape and not self.fields.has_pose_dirs:
+        if (
+            tangent is not None
+            and not self.fields.has_pose_dirs
+            and bool((art.betas == art.betas[:1]).all())  # one shape (a sync: inference only)
+        ):
             weights, offsets = tangent.shaped(x, art.betas[0])  # W̃(X), B̃s(X)·β
             t_g = x + offsets
             return GarmentOutput(skin(t_g, weights, art.transforms), t_g, weights)

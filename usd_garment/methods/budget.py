@@ -86,13 +86,13 @@ def load_budget(path: str | Path) -> list[BudgetEntry]:
         )
     try:
         data = json.loads(path.read_text())
-        if data.get("version") != FORMAT_VERSION:
-            raise BudgetError(f"{path}: error table version {data.get('version')} not supported")
-        return [BudgetEntry(**e) for e in data["entries"]]
-    except (ValueError, KeyError, TypeError) as exc:
-        if isinstance(exc, BudgetError):
-            raise
+        version, rows = data.get("version"), data["entries"]
+        entries = [BudgetEntry(**e) for e in rows] if version == FORMAT_VERSION else None
+    except (ValueError, KeyError, TypeError, AttributeError) as exc:
         raise BudgetError(f"{path}: not an error table ({exc})") from exc
+    if entries is None:
+        raise BudgetError(f"{path}: error table version {version} not supported")
+    return entries
 
 
 def pick(entries: Sequence[BudgetEntry], error_mm: float) -> BudgetEntry:

@@ -411,6 +411,9 @@ class GarmentLayerWriter:
         self.canonical_to_local = np.asarray(info.canonical_to_world) @ np.linalg.inv(
             parent_to_world
         )
+        identity = np.array_equal(self.canonical_to_local, np.eye(4))
+        #: float32 canonical-to-local, None for the identity (points are written as they come).
+        self._to_local = None if identity else self.canonical_to_local.astype(np.float32)
         mirrored = np.linalg.det(self.canonical_to_local[:3, :3]) < 0
         self.faces = [_oriented_faces(g, mirrored) for g in garments]
         self.default_prim = self.parent.GetPrefixes()[0].name
@@ -449,11 +452,10 @@ class GarmentLayerWriter:
         count = {len(p) for p in points}
         if len(count) != 1 or self._added + count.pop() > len(self.time_codes):
             raise ValueError("every garment needs the same frames, no more than the time codes")
-        m = self.canonical_to_local.astype(np.float32)
-        identity = np.array_equal(self.canonical_to_local, np.eye(4))
+        m = self._to_local
         for g, pts in enumerate(points):
             local = np.asarray(pts, dtype=np.float32)
-            if not identity:
+            if m is not None:
                 local = local @ m[:3, :3] + m[3, :3]
             self._pending[g] = np.concatenate([self._pending[g], local])
         self._added += len(points[0])
