@@ -8,13 +8,25 @@ from pathlib import Path
 from typing import Any
 
 import click
+import numpy as np
 from tqdm import tqdm
 
+from usd_garment.body.io import load_body_model
+from usd_garment.canonical.dataset import load_canonical_set
+from usd_garment.canonical.floor import SequenceFloor, representation_floor
 from usd_garment.cli.errors import user_errors
-from usd_garment.cli.options import json_option, lod_option, solver_options, workers_option
+from usd_garment.cli.options import (
+    FrameProgress,
+    body_model_option,
+    json_option,
+    lod_option,
+    solver_options,
+    workers_option,
+)
+from usd_garment.fields.body_fields import load_body_fields
 from usd_garment.garment.template import GARMENT_NAMES
 from usd_garment.sim.material import ClothMaterial
-from usd_garment.training.dataset import MANIFEST_NAME, DatasetConfig, make_dataset
+from usd_garment.training.dataset import MANIFEST_NAME, SPLITS, DatasetConfig, make_dataset
 
 
 def _capture(text: str) -> tuple[str, str]:
@@ -132,3 +144,78 @@ def make(
         f"{summary['frames_ok']} frames, {summary['bytes'] / 1e6:.1f} MB; "
         f"manifest {output / MANIFEST_NAME}"
     )
+
+
+@dataset.command("floor")
+@click.argument("canonical", type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "--split",
+    "split_names",
+    default=",".join(SPLITS),
+    show_default=True,
+    help="Comma-separated splits to measure.",
+)
+@body_model_option
+@click.option(
+    "--fields",
+    type=click.Path(path_type=Path),
+    default=None,
+    help="Diffused body fields of that body; default: the embedded body's.",
+)
+@json_option("Print every sequence's figures as JSON.")
+def floor(
+    canonical: Path, split_names: str, body_model: Path | None, fields: Path | None, as_json: bool
+) -> None:
+    """How close a model trained on the canonical set CANONICAL can come to its simulations:
+    each sequence's targets posed back by the garment model, beside the simulation, both
+    measured against the posed body (winding number: inside forced / elsewhere)."""
+    with user_errors():
+        data = load_canonical_set(canonical)
+        body = load_body_model(body_model)
+        body_fields = load_body_fields(fields)
+        splits = [s.strip() for s in split_names.split(",")]
+        unknown = sorted(set(splits) - set(SPLITS))
+        if unknown:
+            raise click.BadParameter(f"unknown split(s) {unknown}", param_hint="--split")
+        total = sum(1 for s in data.splits if s in splits)
+        with FrameProgress("floor", unit="seq") as bar:
+            bar.on_read(total)
+            rows = representation_floor(data, body, body_fields, splits, bar.progress)
+    if as_json:
+        click.echo(json.dumps([row.to_json() for row in rows], indent=2))
+        return
+    click.echo(_floor_table(rows))
+
+
+def _floor_table(rows: list[SequenceFloor]) -> str:
+    """Per sequence, then frame-weighted means per split: reprojection error (mm) and the
+    inside shares (%) of the simulation and of the targets posed back."""
+    lines = [
+        "sequence | split | frames | reprojection mm | simulation forced / elsewhere % "
+        "| posed back forced / elsewhere %"
+    ]
+
+    def line(name: str, split: str, group: list[SequenceFloor]) -> str:
+        w = np.array([r.frames for r in group], dtype=float)
+
+        def mean(values: list[float]) -> float:
+            return float(np.dot(w, values) / w.sum())
+
+        def pct(part: str, key: str) -> str:
+            return f"{100 * mean([getattr(r, part)[key] for r in group]):.3f}"
+
+        return (
+            f"{name} | {split} | {int(w.sum())} | {mean([r.reprojection_mm for r in group]):.2f} "
+            f"| {pct('simulation', 'inside_forced_share')} / "
+            f"{pct('simulation', 'inside_elsewhere_share')} "
+            f"| {pct('reposed', 'inside_forced_share')} / "
+            f"{pct('reposed', 'inside_elsewhere_share')}"
+        )
+
+    for row in rows:
+        lines.append(line(Path(row.source).stem, row.split, [row]))
+    for split in SPLITS:
+        group = [r for r in rows if r.split == split]
+        if group:
+            lines.append(line("all", split, group))
+    return "\n".join(lines)

@@ -11,7 +11,8 @@ import torch
 from click.testing import CliRunner
 
 from usd_garment.body.io import load_body_model
-from usd_garment.canonical.dataset import load_canonical_set
+from usd_garment.canonical.dataset import CanonicalSet, load_canonical_set, save_canonical_set
+from usd_garment.canonical.floor import pose_canonical, representation_floor
 from usd_garment.canonical.projection import ProjectionSettings, project_sequence
 from usd_garment.canonical.strain import TriangleStrain
 from usd_garment.canonical.unpose import (
@@ -257,3 +258,73 @@ def test_project_update_appends_only_new_layers(tmp_path, body, template, motion
     result = CliRunner().invoke(main, ["project", str(first), "--update", *other])
     assert result.exit_code != 0 and "projection settings" in result.output, result.output
     assert "Traceback" not in result.output and out.read_bytes() == written
+
+
+def _floor_set(template, motion, sim_path, canonical_a, canonical_b):
+    """Two sequences of one simulated layer, with the canonical targets ``canonical_a`` and
+    ``canonical_b`` ``(T, N, 3)``."""
+    betas, pose, trans = motion
+    zeros = np.zeros(2 * FRAMES, np.float32)
+    return CanonicalSet(
+        canonical=np.concatenate([canonical_a, canonical_b]).astype(np.float32),
+        frame_offsets=np.array([0, FRAMES, 2 * FRAMES]),
+        betas=np.stack([betas, betas]),
+        pose=np.concatenate([pose, pose]),
+        trans=np.concatenate([trans, trans]),
+        fps=np.full(2, 30.0),
+        error=zeros,
+        max_error=zeros,
+        template=template.vertices,
+        faces=template.faces,
+        sources=[str(sim_path)] * 2,
+        splits=["train", "test"],
+    )
+
+
+def test_floor_poses_the_targets_back_beside_the_simulation(tmp_path, body, template, motion):
+    betas, pose, trans = motion
+    fields = load_body_fields()
+    x = np.repeat(template.vertices[None], FRAMES, axis=0).astype(np.float32)
+    posed = pose_canonical(GarmentModel(body, fields), x, betas, pose, trans)
+    _, sim_path = _write_inputs(tmp_path, body, template, motion, posed)
+    # Targets of the second sequence: 20 vertices sunk onto the chest joint (inside the trunk).
+    _, joints = body.shaped(torch.as_tensor(betas)[None])
+    sunk = x.copy()
+    chest = np.argsort(np.linalg.norm(template.vertices - joints[0, 9].numpy(), axis=1))[:20]
+    sunk[:, chest] = joints[0, 9].numpy()
+    data = _floor_set(template, motion, sim_path, x, sunk)
+    exact, moved = representation_floor(data, body, fields)
+    assert (exact.split, moved.split, exact.frames) == ("train", "test", FRAMES)
+    assert exact.reprojection_mm < 0.01  # the simulation is M_G(X) itself
+    for key in ("inside_share", "inside_elsewhere_share", "inside_forced_share"):
+        assert exact.reposed[key] == pytest.approx(exact.simulation[key], abs=1e-9)
+    assert moved.simulation == exact.simulation
+    assert moved.reprojection_mm > 1.0
+    assert moved.reposed["inside_share"] >= exact.reposed["inside_share"] + 19 / len(x[0])
+    assert representation_floor(data, body, fields, splits=["test"]) == [moved]
+    data.canonical = data.canonical[:, :-1]
+    with pytest.raises(ValueError, match="holds 3 frames"):
+        representation_floor(data, body, fields)
+
+
+def test_dataset_floor_command_prints_a_table_per_split(tmp_path, body, template, motion):
+    betas, pose, trans = motion
+    x = np.repeat(template.vertices[None], FRAMES, axis=0).astype(np.float32)
+    posed = pose_canonical(GarmentModel(body, load_body_fields()), x, betas, pose, trans)
+    _, sim_path = _write_inputs(tmp_path, body, template, motion, posed)
+    save_canonical_set(tmp_path / "set.npz", _floor_set(template, motion, sim_path, x, x))
+    result = CliRunner().invoke(main, ["dataset", "floor", str(tmp_path / "set.npz")])
+    assert result.exit_code == 0, result.output
+    lines = result.output.strip().splitlines()
+    assert lines[0].startswith("sequence | split | frames | reprojection mm")
+    assert [line.split(" | ")[:3] for line in lines[-2:]] == [
+        ["all", "train", str(FRAMES)],
+        ["all", "test", str(FRAMES)],
+    ]
+    result = CliRunner().invoke(main, ["dataset", "floor", str(tmp_path / "set.npz"), "--json",
+                                       "--split", "test"])  # fmt: skip
+    assert result.exit_code == 0, result.output
+    (row,) = json.loads(result.output)
+    assert row["split"] == "test" and row["reprojection_mm"] < 0.01
+    bad = CliRunner().invoke(main, ["dataset", "floor", str(tmp_path / "set.npz"), "--split", "x"])
+    assert bad.exit_code != 0 and "unknown split" in bad.output
