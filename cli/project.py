@@ -56,6 +56,14 @@ from usd_garment.training.dataset import SPLITS, dataset_layers
     help="Most L-BFGS iterations per chunk of frames.",
 )
 @click.option(
+    "--strain-weight",
+    type=click.FloatRange(0.0),
+    default=ProjectionSettings.strain_weight,
+    show_default=True,
+    help="ω1 of E_strain (m²): keeps the canonical garment close to the template's triangles; "
+    "lower fits the simulation closer where posing folds the cloth (see docs/learning.md).",
+)
+@click.option(
     "--chunk",
     type=click.IntRange(1),
     default=ProjectionSettings.chunk,
@@ -85,6 +93,7 @@ def project(
     garment: str,
     lod: str,
     iterations: int,
+    strain_weight: float,
     chunk: int,
     workers: int,
     update: bool,
@@ -93,7 +102,7 @@ def project(
 ) -> None:
     """Project the simulated garments of SIM_LAYER... (or of a dataset's --manifest) to
     canonical space; write OUTPUT."""
-    settings = ProjectionSettings(iterations=iterations, chunk=chunk)
+    settings = ProjectionSettings(iterations=iterations, strain_weight=strain_weight, chunk=chunk)
     splits = None
     with user_errors():
         if manifest is not None:
