@@ -148,7 +148,7 @@ def test_project_command_writes_the_canonical_set(tmp_path, body, template, moti
     body_path, sim_path = _write_inputs(tmp_path, body, template, motion, posed)
     out = tmp_path / "canonical.npz"
     args = ["project", str(sim_path), str(sim_path), "--body", str(body_path), "-o", str(out),
-            "--lod", "low", "--iterations", "5"]  # fmt: skip
+            "--lod", "low", "--iterations", "5", "--strain-weight", "2e-6"]  # fmt: skip
     result = CliRunner().invoke(main, args)
     assert result.exit_code == 0, result.output
     data = load_canonical_set(out)
@@ -158,6 +158,7 @@ def test_project_command_writes_the_canonical_set(tmp_path, body, template, moti
     np.testing.assert_allclose(data.betas[0], betas, atol=1e-6)
     assert data.error.max() < 2e-4
     assert data.metadata["garment"] == "tshirt" and data.metadata["lod"] == "low"
+    assert data.metadata["projection"]["strain_weight"] == 2e-6
 
 
 def _write_dataset(folder, body, template, motion, posed):
