@@ -26,8 +26,11 @@ hinge pushes with a constant force ω2 while the data term pulls back with 2·re
 hinge wins for any vertex whose reprojection target lies less than ω2 / 2 = 5 cm inside the
 ε-shell of the canonical body (an exact penalty: in effect a hard constraint). ω1 = 1e-5 m²: a
 triangle strained by 0.1 (10 %) pulls its corners with about the force of a 0.5 mm residual on a
-2 cm triangle, so the strain term only decides where the data term does not (vertices pushed out
-by the collision term and their neighbours) and leaves the real strain of the simulated cloth.
+2 cm triangle, so the strain term was meant to decide only where the data term does not (vertices
+pushed out by the collision term and their neighbours). Measured on real motion it does more:
+where posing folds the cloth (an arm against the trunk, hips flexed) X must be strained far more
+than 10 % for M_G(X) to reach the simulation, and ω1 = 1e-5 holds such vertices up to 5 cm off
+their targets, into the posed body (``usd-garment dataset floor``; ``docs/canonical.md``).
 ε = 2 mm: the push-out margin of the baselines (the simulated cloth itself rests about 4 mm out,
 the simulator's contact radius).
 """
