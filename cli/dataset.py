@@ -18,9 +18,11 @@ from usd_garment.cli.errors import user_errors
 from usd_garment.cli.options import (
     FrameProgress,
     body_model_option,
+    fields_option,
     json_option,
     lod_option,
     solver_options,
+    splits_option,
     workers_option,
 )
 from usd_garment.fields.body_fields import load_body_fields
@@ -148,20 +150,9 @@ def make(
 
 @dataset.command("floor")
 @click.argument("canonical", type=click.Path(dir_okay=False, path_type=Path))
-@click.option(
-    "--split",
-    "split_names",
-    default=",".join(SPLITS),
-    show_default=True,
-    help="Comma-separated splits to measure.",
-)
+@splits_option("Comma-separated splits to measure.")
 @body_model_option
-@click.option(
-    "--fields",
-    type=click.Path(path_type=Path),
-    default=None,
-    help="Diffused body fields of that body; default: the embedded body's.",
-)
+@fields_option
 @json_option("Print every sequence's figures as JSON.")
 def floor(
     canonical: Path, split_names: str, body_model: Path | None, fields: Path | None, as_json: bool

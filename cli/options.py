@@ -13,6 +13,7 @@ from tqdm import tqdm
 
 from usd_garment.garment.template import LODS
 from usd_garment.sim.cloth import ITERATIONS, SUBSTEPS
+from usd_garment.training.dataset import SPLITS
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -21,6 +22,12 @@ body_model_option = click.option(
     type=click.Path(dir_okay=False, path_type=Path),
     default=None,
     help="SMPL-layout body file (.npz/.pkl); default: the embedded free body.",
+)
+fields_option = click.option(
+    "--fields",
+    type=click.Path(path_type=Path),
+    default=None,
+    help="Diffused body fields of that body; default: the embedded body's.",
 )
 workers_option = click.option(
     "--workers",
@@ -64,6 +71,13 @@ def solver_options(command: F) -> F:
     )):  # fmt: skip
         command = option(command)
     return command
+
+
+def splits_option(help_text: str) -> Callable[[F], F]:
+    """``--split``: comma-separated dataset splits, all by default, stored as ``split_names``."""
+    return click.option(
+        "--split", "split_names", default=",".join(SPLITS), show_default=True, help=help_text
+    )
 
 
 def json_option(help_text: str = "Print a JSON summary on stdout.") -> Callable[[F], F]:

@@ -11,9 +11,16 @@ import numpy as np
 from usd_garment.canonical.project_layers import project_layers
 from usd_garment.canonical.projection import ProjectionSettings
 from usd_garment.cli.errors import user_errors
-from usd_garment.cli.options import FrameProgress, body_model_option, lod_option, workers_option
+from usd_garment.cli.options import (
+    FrameProgress,
+    body_model_option,
+    fields_option,
+    lod_option,
+    splits_option,
+    workers_option,
+)
 from usd_garment.garment.template import GARMENT_NAMES
-from usd_garment.training.dataset import SPLITS, dataset_layers
+from usd_garment.training.dataset import dataset_layers
 
 
 @click.command("project")
@@ -32,13 +39,7 @@ from usd_garment.training.dataset import SPLITS, dataset_layers
     help="A 'dataset make' folder (or its manifest.json): project its ok sequences instead of "
     "SIM_LAYER... (garment and lod from the manifest).",
 )
-@click.option(
-    "--split",
-    "split_names",
-    default=",".join(SPLITS),
-    show_default=True,
-    help="With --manifest: comma-separated splits to project.",
-)
+@splits_option("With --manifest: comma-separated splits to project.")
 @click.option(
     "-o",
     "--output",
@@ -78,12 +79,7 @@ from usd_garment.training.dataset import SPLITS, dataset_layers
     "that grew, a simulation run that finished later).",
 )
 @body_model_option
-@click.option(
-    "--fields",
-    type=click.Path(path_type=Path),
-    default=None,
-    help="Diffused body fields of that body; default: the embedded body's.",
-)
+@fields_option
 def project(
     sim_layers: tuple[Path, ...],
     body_layers: tuple[Path, ...],
