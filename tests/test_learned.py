@@ -189,7 +189,7 @@ def test_learned_method_times_its_stages(body_model: BodyModel, synthetic_body: 
                                          tmp_path: Path) -> None:  # fmt: skip
     """The per-stage seconds that ``benchmarks/bench_dress.py`` reports in ms per frame."""
     from usd_garment.dress import dress
-    from usd_garment.methods.learned import STAGES, LearnedMethod
+    from usd_garment.methods.learned import STAGES, LearnedCanonicalMethod, LearnedMethod
 
     if body_model is synthetic_body:
         pytest.skip("needs the embedded default body and its fields")
@@ -200,3 +200,7 @@ def test_learned_method_times_its_stages(body_model: BodyModel, synthetic_body: 
     assert set(method.seconds) == set(STAGES)
     ran = {k for k, v in method.seconds.items() if v > 0}
     assert ran == {"load", "regressor", "decoder", "fields", "posing", "carry"}
+    canonical = LearnedCanonicalMethod()
+    dress(body, tmp_path / "c.usdc", method=canonical, lod="low")
+    ran = {k for k, v in canonical.seconds.items() if v > 0}
+    assert ran == {"load", "regressor", "decoder", "canonical", "fields", "posing", "carry"}

@@ -329,3 +329,29 @@ def test_dataset_floor_command_prints_a_table_per_split(tmp_path, body, template
     assert row["split"] == "test" and row["reprojection_mm"] < 0.01
     bad = CliRunner().invoke(main, ["dataset", "floor", str(tmp_path / "set.npz"), "--split", "x"])
     assert bad.exit_code != 0 and "unknown split" in bad.output
+
+
+def test_canonical_push_out_moves_only_the_vertices_near_the_body(template):
+    from usd_garment.canonical.push_out import push_out_canonical
+
+    fields = load_body_fields()
+    x = torch.as_tensor(template.vertices, dtype=torch.float32)
+    with torch.enable_grad():
+        p = x.clone().requires_grad_(True)
+        (grad,) = torch.autograd.grad(fields.sdf(p).sum(), p)
+    d = fields.sdf(x)
+    normal = grad / grad.norm(dim=-1, keepdim=True)
+    # Frame 1: a third of the vertices 2 mm .. 3 cm out sunk 5 mm into the canonical body.
+    sunk = ((d > 2e-3) & (d < 3e-2)).nonzero().squeeze(1)[::3]
+    assert sunk.numel() > 10
+    moved = x.clone()
+    moved[sunk] -= (d[sunk] + 5e-3).unsqueeze(-1) * normal[sunk]
+    batch = torch.stack([x, moved])
+    assert (fields.sdf(batch[1, sunk]) < 0).float().mean() > 0.9
+    out = push_out_canonical(batch, fields.sdf)
+    assert out.shape == batch.shape
+    assert fields.sdf(out).min() > 2e-3 - 5e-4
+    untouched = fields.sdf(batch) >= 2e-3
+    assert torch.equal(out[untouched], batch[untouched])
+    back = (out[1, sunk] - x[sunk]).norm(dim=-1)  # out along the line it was sunk on, to ε
+    assert float((back - (d[sunk] - 2e-3)).abs().mean()) < 1.5e-3

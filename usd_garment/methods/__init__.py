@@ -2,7 +2,11 @@
 
 from usd_garment.methods.base import GarmentMethod, available_methods, get_method, register_method
 from usd_garment.methods.lbs import LbsMethod, LbsPushOutMethod
-from usd_garment.methods.learned import LearnedMethod, LearnedPushOutMethod
+from usd_garment.methods.learned import (
+    LearnedCanonicalMethod,
+    LearnedMethod,
+    LearnedPushOutMethod,
+)
 from usd_garment.methods.simulation import SimulationMethod
 
 register_method(LbsMethod.name, LbsMethod)
@@ -10,5 +14,6 @@ register_method(LbsPushOutMethod.name, LbsPushOutMethod)
 register_method(SimulationMethod.name, SimulationMethod)
 register_method(LearnedMethod.name, LearnedMethod)
 register_method(LearnedPushOutMethod.name, LearnedPushOutMethod)
+register_method(LearnedCanonicalMethod.name, LearnedCanonicalMethod)
 
 __all__ = ["GarmentMethod", "available_methods", "get_method", "register_method"]
