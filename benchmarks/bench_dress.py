@@ -1,9 +1,10 @@
 """Benchmark of the stage processor on a 1,000-frame 30 fps procedural animation: ``dress`` with
-the default method (the learned one where a model ships) and with ``lbs``, in-process (read,
-compute, write; the learned method's stages in ms per frame: model loading, pose code and GRU,
-decoder, fields, posing) and once through the CLI (with interpreter start); ``learned+postprocess``
-(``dress --quality final``), ``lbs+postprocess`` and the physics simulation on slices of the
-same animation; the ratios between them.
+the default method (the learned one where a model ships), with ``learned+canonical`` (the
+decoded garment pushed out of the canonical body) and with ``lbs``, in-process (read, compute,
+write; the learned methods' stages in ms per frame: model loading, pose code and GRU, decoder,
+canonical push-out, fields, posing) and once through the CLI (with interpreter start);
+``learned+postprocess`` (``dress --quality final``), ``lbs+postprocess`` and the physics
+simulation on slices of the same animation; the ratios between them.
 
 Run: ``python benchmarks/bench_dress.py [--frames 1000] [--postprocess-frames 100]
 [--simulation-frames 30]``
@@ -80,7 +81,7 @@ def main() -> None:
 
         default = default_method("tshirt", "high")
         runs = {}
-        for method in dict.fromkeys((default, "lbs")):
+        for method in dict.fromkeys((default, "learned+canonical", "lbs")):
             instance = get_method(method)
             runs[method] = dress(body_usd, folder / f"{method}.usdc", method=instance).to_json()
             report(f"{method} (in-process)", runs[method])
