@@ -28,7 +28,14 @@ from usd_garment.cli.options import (
 from usd_garment.fields.body_fields import load_body_fields
 from usd_garment.garment.template import GARMENT_NAMES
 from usd_garment.sim.material import ClothMaterial
-from usd_garment.training.dataset import MANIFEST_NAME, SPLITS, DatasetConfig, make_dataset
+from usd_garment.training.data_quality import GROUPINGS, GroupQuality, dataset_quality
+from usd_garment.training.dataset import (
+    MANIFEST_NAME,
+    SPLITS,
+    DatasetConfig,
+    make_dataset,
+    read_manifest,
+)
 
 
 def _capture(text: str) -> tuple[str, str]:
@@ -209,4 +216,40 @@ def _floor_table(rows: list[SequenceFloor]) -> str:
         group = [r for r in rows if r.split == split]
         if group:
             lines.append(line("all", split, group))
+    return "\n".join(lines)
+
+
+@dataset.command("summary")
+@click.argument("folder", type=click.Path(file_okay=False, path_type=Path))
+@click.option(
+    "--by", type=click.Choice(GROUPINGS), default="split", show_default=True,
+    help="Group the sequences per split, per motion kind (each capture alone) or not at all.",
+)  # fmt: skip
+@json_option("Print every group's figures as JSON.")
+def summary(folder: Path, by: str, as_json: bool) -> None:
+    """The simulation checks of the dataset in FOLDER (from its manifest), summed up: inside the
+    body forced / elsewhere, distance from the body, stretch, NaN, retried and bad frames."""
+    with user_errors():
+        rows = dataset_quality(read_manifest(folder), by)
+    if as_json:
+        click.echo(json.dumps([row.to_json() for row in rows], indent=2))
+        return
+    click.echo(_summary_table(rows))
+
+
+def _summary_table(rows: list[GroupQuality]) -> str:
+    """One line per group; shares in %, distance in cm, time in minutes."""
+    lines = [
+        "group | ok / sequences | frames | forced mean % | elsewhere mean / worst frame % "
+        "| sequences above 0.05 % mean / 0.5 % frame | farthest cm (sequences > 10 cm) "
+        "| stretch p99 max | NaN / retried / bad frames | simulation min"
+    ]
+    for r in rows:
+        lines.append(
+            f"{r.group} | {r.ok} / {r.sequences} | {r.frames} | {100 * r.forced_mean:.3f} "
+            f"| {100 * r.elsewhere_mean:.3f} / {100 * r.elsewhere_max:.3f} "
+            f"| {r.above_mean} / {r.above_frame} | {100 * r.max_distance_m:.1f} ({r.far}) "
+            f"| {r.stretch_p99_max:.3f} | {r.nan_frames} / {r.retried_frames} / {r.bad_frames} "
+            f"| {r.seconds / 60:.1f}"
+        )
     return "\n".join(lines)

@@ -1,0 +1,80 @@
+"""``usd-garment dataset summary``: a manifest's simulation checks summed up per split, kind or
+sequence (frame-weighted means, worst frames, counts against the ground truth's targets)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+from click.testing import CliRunner
+
+from usd_garment.cli.main import main
+from usd_garment.training.data_quality import dataset_quality
+from usd_garment.training.dataset import MANIFEST_FORMAT, MANIFEST_NAME
+
+
+def _entry(name: str, split: str, kind: str, frames: int, **checks: Any) -> dict[str, Any]:
+    base = {
+        "inside_elsewhere_share_mean": 0.0, "inside_elsewhere_share_max": 0.0,
+        "inside_forced_share_mean": 0.0, "inside_forced_share_max": 0.0, "nan_frames": 0,
+        "bad_frames": 0, "retries": {}, "max_distance_m": 0.05, "stretch_p99_max": 1.1,
+    }  # fmt: skip
+    return {
+        "name": name, "split": split, "motion_kind": kind, "capture": "", "frames": frames,
+        "status": "ok", "checks": {**base, **checks}, "seconds": 60.0,
+    }  # fmt: skip
+
+
+@pytest.fixture
+def manifest() -> dict[str, Any]:
+    capture = _entry("c00_s0", "test", "capture", 300, max_distance_m=0.12, stretch_p99_max=1.25)
+    capture["capture"] = "/data/cmu_131_03.bvh"
+    bad = {**_entry("m01_s0", "train", "run", 90), "status": "bad"}
+    del bad["checks"]
+    return {
+        "format": MANIFEST_FORMAT,
+        "sequences": [
+            _entry("m00_s0", "train", "walk", 100, inside_elsewhere_share_mean=1e-3,
+                   inside_elsewhere_share_max=6e-3, inside_forced_share_mean=2e-3,
+                   retries={"12": 1, "13": 2}, bad_frames=1),
+            _entry("m00_s1", "train", "walk", 300, inside_elsewhere_share_mean=2e-4,
+                   inside_elsewhere_share_max=1e-3),
+            bad,
+            capture,
+        ],
+    }  # fmt: skip
+
+
+def test_rows_are_frame_weighted_and_count_the_targets(manifest: dict[str, Any]) -> None:
+    train, test, every = dataset_quality(manifest, "split")
+    assert (train.group, train.sequences, train.ok, train.frames) == ("train", 3, 2, 400)
+    assert train.elsewhere_mean == pytest.approx((100 * 1e-3 + 300 * 2e-4) / 400)
+    assert train.forced_mean == pytest.approx(100 * 2e-3 / 400)
+    assert (train.elsewhere_max, train.above_mean, train.above_frame) == (6e-3, 1, 1)
+    assert (train.retried_frames, train.bad_frames, train.far) == (2, 1, 0)
+    assert (test.far, test.max_distance_m, test.stretch_p99_max) == (1, 0.12, 1.25)
+    assert (every.group, every.ok, every.frames, every.seconds) == ("all", 3, 700, 180.0)
+    assert every.elsewhere_mean == pytest.approx((0.1 + 0.06) / 700)
+    kinds = [row.group for row in dataset_quality(manifest, "kind")]
+    assert kinds == ["walk", "run", "cmu_131_03", "all"]
+    assert len(dataset_quality(manifest, "sequence")) == 5
+    with pytest.raises(ValueError, match="unknown grouping"):
+        dataset_quality(manifest, "shape")
+
+
+def test_cli_table_json_and_errors(tmp_path: Path, manifest: dict[str, Any]) -> None:
+    (tmp_path / MANIFEST_NAME).write_text(json.dumps(manifest))
+    runner = CliRunner()
+    result = runner.invoke(main, ["dataset", "summary", str(tmp_path), "--by", "kind"])
+    assert result.exit_code == 0, result.output
+    lines = result.output.splitlines()
+    assert lines[3].startswith("cmu_131_03 | 1 / 1 | 300 |") and "| 12.0 (1) |" in lines[3]
+    assert lines[1].startswith("walk | 2 / 2 | 400 | 0.050 | 0.040 / 0.600 | 1 / 1 |")
+    result = runner.invoke(main, ["dataset", "summary", str(tmp_path), "--json"])
+    rows = json.loads(result.output)
+    assert [r["group"] for r in rows] == ["train", "test", "all"] and rows[2]["frames"] == 700
+    result = runner.invoke(main, ["dataset", "summary", str(tmp_path / "missing")])
+    assert result.exit_code != 0 and "no dataset manifest" in result.output
+    assert "Traceback" not in result.output
