@@ -41,14 +41,16 @@ def _labelled_models(values: tuple[str, ...]) -> list[tuple[str, Path]]:
 def _methods(
     names: tuple[str, ...],
     models: list[tuple[str, Path]],
+    model_methods: tuple[str, ...],
     lods: tuple[str, ...],
     garment: str,
     simulation_frames: int,
     simulation_lods: tuple[str, ...],
 ) -> list[BenchMethod]:
     """The benched methods: learned ones at the level of detail they were trained on and the
-    coarser ones of ``lods`` (carried down), the simulation on the first ``simulation_frames``
-    at ``simulation_lods``, the others at every one of ``lods``."""
+    coarser ones of ``lods`` (carried down), each of ``models`` with each of ``model_methods``
+    (labelled LABEL, LABEL+canonical, LABEL+postprocess), the simulation on the first
+    ``simulation_frames`` at ``simulation_lods``, the others at every one of ``lods``."""
     out = []
     runs: list[tuple[str, str, Path | None]] = []  # label, method, model directory
     for name in names or DEFAULT_METHODS:
@@ -60,7 +62,11 @@ def _methods(
             continue
         else:
             out.append(BenchMethod(name, name, lods=lods))
-    runs += [(label, LearnedMethod.name, path) for label, path in models]
+    runs += [
+        (label + method.removeprefix(LearnedMethod.name), method, path)
+        for label, path in models
+        for method in model_methods or (LearnedMethod.name,)
+    ]
     learned = []
     for label, method, path in runs:
         if path is None:
@@ -126,6 +132,14 @@ def _plain(value: object) -> object:
     help="Also bench a learned model directory under LABEL (repeat), e.g. an ablation.",
 )
 @click.option(
+    "--model-method",
+    "model_methods",
+    multiple=True,
+    type=click.Choice(LEARNED_METHODS),
+    help="Learned methods each --model is benched with (repeat; default: learned); LABEL gains "
+    "the method's suffix, e.g. LABEL+canonical.",
+)
+@click.option(
     "--lod",
     "lods",
     multiple=True,
@@ -175,6 +189,7 @@ def bench(
     split_names: str,
     names: tuple[str, ...],
     models: tuple[str, ...],
+    model_methods: tuple[str, ...],
     lods: tuple[str, ...],
     simulation_frames: int,
     simulation_lods: tuple[str, ...],
@@ -211,8 +226,8 @@ def bench(
             for path in (case.body, case.reference):
                 if path is not None and not path.is_file():
                     raise click.BadParameter(f"{path}: no such file")
-        methods = _methods(names, _labelled_models(models), lods or LODS, garment,
-                           simulation_frames, simulation_lods or ("high",))  # fmt: skip
+        methods = _methods(names, _labelled_models(models), model_methods, lods or LODS,
+                           garment, simulation_frames, simulation_lods or ("high",))  # fmt: skip
     output.mkdir(parents=True, exist_ok=True)
     if stress:
         with user_errors():

@@ -62,7 +62,7 @@ from usd_garment.training.dataset import dataset_layers
     default=ProjectionSettings.strain_weight,
     show_default=True,
     help="ω1 of E_strain (m²): keeps the canonical garment close to the template's triangles; "
-    "lower fits the simulation closer where posing folds the cloth (see docs/learning.md).",
+    "lower fits the simulation closer where posing folds the cloth (see docs/canonical.md).",
 )
 @click.option(
     "--chunk",

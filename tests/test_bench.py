@@ -23,6 +23,7 @@ from usd_garment.eval.bench import (
     run_bench,
 )
 from usd_garment.methods.budget import load_budget
+from usd_garment.methods.learned import shipped_model
 from usd_garment.motion.procedural import make_motion
 from usd_garment.usd.body_layer import write_body_layer
 
@@ -99,6 +100,25 @@ def test_a_failing_method_is_a_row_not_the_end(tmp_path: Path, walk: Path) -> No
     assert [r.label for r in rows] == ["broken", "lbs"]
     assert rows[0].error.startswith("ModelError") and rows[0].frames == 0
     assert not rows[1].error and np.isfinite(rows[1].frames_per_second)
+
+
+def test_a_model_is_benched_with_each_model_method(tmp_path: Path, walk: Path) -> None:
+    model = shipped_model("tshirt")
+    assert model is not None
+    args = ["bench", str(walk), "--method", "lbs", "--lod", "low", "--model", f"cand={model}",
+            "--model-method", "learned", "--model-method", "learned+canonical",
+            "-o", str(tmp_path / "r")]  # fmt: skip
+    result = CliRunner().invoke(main, args)
+    assert result.exit_code == 0, result.output
+    rows = json.loads((tmp_path / "r" / "report.json").read_text())["rows"]
+    assert [(r["label"], r["method"], r["lod"]) for r in rows] == [
+        ("cand", "learned", "high"),
+        ("cand", "learned", "low"),  # carried down to the --lod asked for
+        ("cand+canonical", "learned+canonical", "high"),
+        ("cand+canonical", "learned+canonical", "low"),
+        ("lbs", "lbs", "low"),
+    ]
+    assert not any(r["error"] for r in rows)
 
 
 @pytest.mark.parametrize(
