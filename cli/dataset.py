@@ -72,6 +72,12 @@ def dataset() -> None:
     "against the trunk, as in capture).",
 )
 @click.option(
+    "--train-only",
+    is_flag=True,
+    help="Every procedural motion in the train split: extra training data for a model whose "
+    "validation and test motions come from another dataset (captures keep their split).",
+)
+@click.option(
     "--capture",
     "captures",
     multiple=True,
@@ -106,6 +112,7 @@ def make(
     seed: int,
     shape_sigma: float,
     open_shoulders: bool,
+    train_only: bool,
     captures: tuple[str, ...],
     capture_shapes: int,
     substeps: int,
@@ -134,7 +141,7 @@ def make(
             config = DatasetConfig(
                 garment=garment, lod=lod, motions=motions, shapes=shapes, frames=frames,
                 seed=seed, substeps=substeps, iterations=iterations, material=fabric,
-                shape_sigma=shape_sigma, open_shoulders=open_shoulders,
+                shape_sigma=shape_sigma, open_shoulders=open_shoulders, train_only=train_only,
                 captures=tuple(_capture(text) for text in captures),
                 capture_shapes=capture_shapes,
             )  # fmt: skip

@@ -130,6 +130,26 @@ def test_captures_join_the_plan_with_their_splits(tmp_path: Path) -> None:
         DatasetConfig(captures=((str(tmp_path / "none.bvh"), "train"),))
 
 
+def test_train_only_puts_every_procedural_motion_in_train(tmp_path: Path) -> None:
+    capture = tmp_path / "walk.usda"
+    capture.write_text("#usda 1.0\n")
+    held = plan_sequences(DatasetConfig(motions=10, shapes=2, seed=1))
+    config = DatasetConfig(
+        motions=10, shapes=2, seed=1, train_only=True, captures=((str(capture), "test"),)
+    )
+    extra = plan_sequences(config)
+    assert {s.split for s in extra if not s.capture} == {"train"}
+    assert [s.split for s in extra if s.capture] == ["test"]
+    assert {s.split for s in held} == {"train", "validation", "test"}
+    keys = ("name", "motion_kind", "motion_seed", "betas")  # the same motions and shapes
+    assert [[getattr(s, k) for k in keys] for s in extra[:20]] == [
+        [getattr(s, k) for k in keys] for s in held
+    ]
+    before = {k: v for k, v in DatasetConfig().to_json().items() if k != "train_only"}
+    # A manifest made before the option existed resumes as it was.
+    assert dataset_module._fixed(before) == dataset_module._fixed(DatasetConfig().to_json())
+
+
 def test_a_captured_body_layer_is_simulated_whole(tmp_path: Path, body_model: BodyModel) -> None:
     capture = tmp_path / "capture.usda"
     write_body_layer(capture, make_motion("walk", 8, 60.0, seed=2, body=body_model), body_model)

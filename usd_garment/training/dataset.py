@@ -70,6 +70,8 @@ class DatasetConfig:
         captures: real motions, ``(path, split)`` pairs: a ``.bvh`` file or a USD body layer,
             simulated on the first ``capture_shapes`` shapes, whole, resampled to ``fps``.
         capture_shapes: how many of the shapes each capture is simulated on.
+        train_only: every procedural motion goes to the train split (more training data for a
+            model whose held-out motions come from another dataset); captures keep theirs.
     """
 
     garment: str = "tshirt"
@@ -86,6 +88,7 @@ class DatasetConfig:
     open_shoulders: bool = False
     captures: tuple[tuple[str, str], ...] = ()
     capture_shapes: int = 1
+    train_only: bool = False
 
     def __post_init__(self) -> None:
         if self.garment not in GARMENT_NAMES:
@@ -171,7 +174,11 @@ def plan_sequences(config: DatasetConfig) -> list[SequenceSpec]:
         random_betas(np.random.default_rng([config.seed, 1, j]), config.shape_sigma)
         for j in range(1, config.shapes)
     ]
-    splits = motion_splits(config.motions, config.seed)
+    splits = (
+        ["train"] * config.motions
+        if config.train_only
+        else motion_splits(config.motions, config.seed)
+    )
     specs = []
     for i in range(config.motions):
         motion_seed = int(np.random.SeedSequence([config.seed, 3, i]).generate_state(1)[0])
@@ -265,10 +272,11 @@ def run_sequence(folder: str, config: DatasetConfig, spec: SequenceSpec) -> dict
 
 def _fixed(config: dict[str, Any]) -> dict[str, Any]:
     """A config without the motion, shape and capture lists: the plan of more motions, shapes or
-    captures starts with that of fewer, so a dataset can be resumed with more."""
+    captures starts with that of fewer, so a dataset can be resumed with more (a manifest made
+    before ``train_only`` existed had none)."""
     return {
         k: v
-        for k, v in config.items()
+        for k, v in {"train_only": False, **config}.items()
         if k not in ("motions", "shapes", "captures", "capture_shapes")
     }
 
