@@ -6,6 +6,7 @@ simulation method for strong body shapes."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -15,6 +16,7 @@ import trimesh
 from usd_garment.eval.body_distance import BodySurface
 from usd_garment.sim.checks import (
     CheckLimits,
+    FrameCheck,
     check_frame,
     frame_body_distance,
     measure_frame,
@@ -201,6 +203,23 @@ def test_limits_per_garment() -> None:
     """A dress's hem swings free of the legs: its fell-off distance is beyond the T-shirt's."""
     assert CheckLimits.for_garment("tshirt") == CheckLimits()
     assert CheckLimits.for_garment("dress").max_distance > 2 * CheckLimits().max_distance
+    assert CheckLimits.for_garment("dress").far_distance > 2 * CheckLimits().max_distance
+
+
+def test_far_frame_is_retried_but_not_fatal() -> None:
+    """A vertex beyond the 10 cm target but within the 15 cm fell-off distance fails the frame
+    (it is simulated again with more substeps, flagged bad if it stays) without ending the
+    sequence; beyond 15 cm it is fatal."""
+    limits = CheckLimits()
+    check = FrameCheck(
+        nan_count=0, inside_share=0.0, inside_forced_share=0.0, inside_elsewhere_share=0.0,
+        penetrating_share=0.0, max_distance=0.12, stretch_p99=1.1, stretch_max=1.2,
+    )  # fmt: skip
+    assert check.failures(limits) == ["a vertex 0.120 m from the body"]
+    assert check.fatal(limits) == []
+    assert check.failures(CheckLimits.for_garment("dress")) == []
+    fell = replace(check, max_distance=0.16)
+    assert fell.fatal(limits) == ["a vertex 0.160 m from the body (fell off)"]
 
 
 def test_forced_contact_is_not_a_failure() -> None:
