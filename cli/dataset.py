@@ -95,6 +95,10 @@ def dataset() -> None:
 @solver_options
 @workers_option
 @click.option("--resume", is_flag=True, help="Finish the dataset already in OUTPUT.")
+@splits_option(
+    "Comma-separated splits to simulate (e.g. 'test' for a benchmark); the other sequences "
+    "stay pending for a later --resume."
+)
 @click.option(
     "-o",
     "--output",
@@ -120,6 +124,7 @@ def make(
     material: Path | None,
     workers: int,
     resume: bool,
+    split_names: str,
     output: Path,
     as_json: bool,
 ) -> None:
@@ -145,9 +150,11 @@ def make(
                 captures=tuple(_capture(text) for text in captures),
                 capture_shapes=capture_shapes,
             )  # fmt: skip
+            splits = [s.strip() for s in split_names.split(",")]
             manifest = make_dataset(
-                output, config, workers=workers, resume=resume, on_sequence=on_sequence
-            )
+                output, config, workers=workers, resume=resume, splits=splits,
+                on_sequence=on_sequence,
+            )  # fmt: skip
     finally:
         if bar is not None:
             bar.close()
@@ -155,9 +162,11 @@ def make(
     if as_json:
         click.echo(json.dumps(summary, indent=2))
         return
+    pending = summary["sequences"] - summary["ok"] - summary["bad"]
     click.echo(
-        f"{summary['ok']} of {summary['sequences']} sequences ok ({summary['bad']} bad), "
-        f"{summary['frames_ok']} frames, {summary['bytes'] / 1e6:.1f} MB; "
+        f"{summary['ok']} of {summary['sequences']} sequences ok ({summary['bad']} bad"
+        f"{f', {pending} pending' if pending else ''}), {summary['frames_ok']} frames, "
+        f"{summary['bytes'] / 1e6:.1f} MB; "
         f"manifest {output / MANIFEST_NAME}"
     )
 

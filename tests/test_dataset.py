@@ -4,6 +4,7 @@ with a manifest, resuming without redoing finished sequences, bad sequences mark
 from __future__ import annotations
 
 import json
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -99,6 +100,24 @@ def test_other_settings_are_refused(tmp_path: Path, monkeypatch: pytest.MonkeyPa
     )
     with pytest.raises(ValueError, match="other settings"):
         make_dataset(tmp_path, DatasetConfig(lod="low", motions=1, shapes=1), resume=True)
+
+
+def test_only_some_splits_run(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    config = DatasetConfig(lod="low", motions=5, shapes=1)
+    ran: list[str] = []
+
+    def run(folder: str, config: DatasetConfig, spec: dataset_module.SequenceSpec) -> dict:
+        ran.append(spec.name)
+        return {**asdict(spec), "status": "bad", "message": "not simulated in this test"}
+
+    monkeypatch.setattr(dataset_module, "run_sequence", run)
+    manifest = make_dataset(tmp_path / "d", config, splits=("test",))
+    test = sorted(s.name for s in plan_sequences(config) if s.split == "test")
+    assert test and sorted(ran) == test
+    status = {s["name"]: s["status"] for s in manifest["sequences"]}
+    assert all(status[name] == ("bad" if name in test else "pending") for name in status)
+    with pytest.raises(ValueError, match="unknown split"):
+        make_dataset(tmp_path / "e", config, splits=("holdout",))
 
 
 @pytest.mark.slow

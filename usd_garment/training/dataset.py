@@ -388,6 +388,7 @@ def make_dataset(
     *,
     workers: int = 1,
     resume: bool = False,
+    splits: Sequence[str] = SPLITS,
     on_sequence: SequenceProgress | None = None,
 ) -> dict[str, Any]:
     """Make (or, with ``resume``, finish) the dataset ``config`` in ``folder``.
@@ -399,18 +400,25 @@ def make_dataset(
             process.
         resume: keep the finished sequences of an existing manifest with the same config (the
             motion and shape counts may grow; splits are reassigned).
+        splits: simulate only the sequences of these splits (e.g. ``("test",)`` to rebuild the
+            held-out sequences for a benchmark); the others stay "pending" in the manifest for a
+            later ``resume``.
         on_sequence: called after each sequence made (see ``SequenceProgress``).
 
     Returns:
         The manifest (also written to ``folder/manifest.json``).
 
     Raises:
-        ValueError: a manifest already there without ``resume``, or made with another config.
+        ValueError: a manifest already there without ``resume``, made with another config, or
+            an unknown split.
         FileNotFoundError: the parent folder does not exist.
     """
     folder = Path(folder)
     if workers < 1:
         raise ValueError("workers must be >= 1")
+    unknown = sorted(set(splits) - set(SPLITS))
+    if unknown or not splits:
+        raise ValueError(f"unknown split(s) {unknown} ({', '.join(SPLITS)})")
     if not folder.parent.is_dir():
         raise FileNotFoundError(f"{folder.parent}: folder does not exist")
     specs = plan_sequences(config)
@@ -449,7 +457,7 @@ def make_dataset(
         },
         "sequences": list(entries.values()),
     }
-    todo = [s for s in specs if entries[s.name]["status"] == "pending"]
+    todo = [s for s in specs if entries[s.name]["status"] == "pending" and s.split in splits]
     _write_manifest(folder, manifest)
     tasks = [(str(folder), config, spec) for spec in todo]
 
