@@ -13,6 +13,7 @@ from tqdm import tqdm
 
 from usd_garment.body.io import load_body_model
 from usd_garment.cli.errors import user_errors
+from usd_garment.cli.options import split_list
 from usd_garment.eval.bench import BenchInput, BenchMethod, chart_table, run_bench, write_report
 from usd_garment.eval.bench_plots import plot_chart, plot_collision_curves
 from usd_garment.eval.stress import LONG_FRAMES, write_stress_inputs
@@ -211,7 +212,7 @@ def bench(
             for k, path in enumerate(inputs)
         ]
         if manifest is not None:
-            layers = dataset_layers(manifest, [s.strip() for s in split_names.split(",")])
+            layers = dataset_layers(manifest, split_list(split_names))
             cases += [
                 BenchInput(name, body, sim)
                 for name, body, sim in zip(

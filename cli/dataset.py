@@ -22,6 +22,7 @@ from usd_garment.cli.options import (
     json_option,
     lod_option,
     solver_options,
+    split_list,
     splits_option,
     workers_option,
 )
@@ -150,7 +151,7 @@ def make(
                 captures=tuple(_capture(text) for text in captures),
                 capture_shapes=capture_shapes,
             )  # fmt: skip
-            splits = [s.strip() for s in split_names.split(",")]
+            splits = split_list(split_names)
             manifest = make_dataset(
                 output, config, workers=workers, resume=resume, splits=splits,
                 on_sequence=on_sequence,
@@ -187,7 +188,7 @@ def floor(
         data = load_canonical_set(canonical)
         body = load_body_model(body_model)
         body_fields = load_body_fields(fields)
-        splits = [s.strip() for s in split_names.split(",")]
+        splits = split_list(split_names)
         unknown = sorted(set(splits) - set(SPLITS))
         if unknown:
             raise click.BadParameter(f"unknown split(s) {unknown}", param_hint="--split")

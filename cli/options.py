@@ -80,6 +80,11 @@ def splits_option(help_text: str) -> Callable[[F], F]:
     )
 
 
+def split_list(split_names: str) -> list[str]:
+    """The split names of a ``--split`` value (comma-separated, spaces ignored)."""
+    return [s.strip() for s in split_names.split(",")]
+
+
 def json_option(help_text: str = "Print a JSON summary on stdout.") -> Callable[[F], F]:
     """The ``--json`` flag, stored as ``as_json``."""
     return click.option("--json", "as_json", is_flag=True, help=help_text)

@@ -16,6 +16,7 @@ from usd_garment.cli.options import (
     body_model_option,
     fields_option,
     lod_option,
+    split_list,
     splits_option,
     workers_option,
 )
@@ -104,7 +105,7 @@ def project(
         if manifest is not None:
             if sim_layers or body_layers:
                 raise click.UsageError("give either SIM_LAYER... with --body, or --manifest")
-            layers = dataset_layers(manifest, [s.strip() for s in split_names.split(",")])
+            layers = dataset_layers(manifest, split_list(split_names))
             sim_layers, body_layers = tuple(layers.garments), tuple(layers.bodies)
             garment, lod, splits = layers.garment, layers.lod, layers.splits
         elif not sim_layers or not body_layers:

@@ -322,6 +322,13 @@ def read_manifest(folder: str | Path) -> dict[str, Any]:
     return manifest
 
 
+def check_splits(splits: Sequence[str]) -> None:
+    """Raise ``ValueError`` unless ``splits`` names at least one split, all of them known."""
+    unknown = [s for s in splits if s not in SPLITS]
+    if unknown or not splits:
+        raise ValueError(f"unknown split '{unknown[0] if unknown else ''}' ({', '.join(SPLITS)})")
+
+
 @dataclass(frozen=True)
 class DatasetLayers:
     """The ok sequences of a dataset, as layer paths (for ``usd-garment project``).
@@ -351,9 +358,7 @@ def dataset_layers(folder: str | Path, splits: Sequence[str] = SPLITS) -> Datase
     folder = Path(folder)
     if folder.name == MANIFEST_NAME and folder.is_file():
         folder = folder.parent
-    unknown = [s for s in splits if s not in SPLITS]
-    if unknown or not splits:
-        raise ValueError(f"unknown split '{unknown[0] if unknown else ''}' ({', '.join(SPLITS)})")
+    check_splits(splits)
     manifest = read_manifest(folder)
     chosen = [q for q in manifest["sequences"] if q["status"] == "ok" and q["split"] in splits]
     if not chosen:
@@ -416,9 +421,7 @@ def make_dataset(
     folder = Path(folder)
     if workers < 1:
         raise ValueError("workers must be >= 1")
-    unknown = sorted(set(splits) - set(SPLITS))
-    if unknown or not splits:
-        raise ValueError(f"unknown split(s) {unknown} ({', '.join(SPLITS)})")
+    check_splits(splits)
     if not folder.parent.is_dir():
         raise FileNotFoundError(f"{folder.parent}: folder does not exist")
     specs = plan_sequences(config)
