@@ -318,3 +318,18 @@ def test_tangent_of_one_shape_is_the_tangent_contracted_with_its_betas() -> None
     all_weights, shape_dirs, _ = tangent.all_fields(points)
     assert torch.allclose(weights, all_weights, atol=1e-6)
     assert torch.allclose(offsets, torch.einsum("bnck,k->bnc", shape_dirs, betas), atol=1e-6)
+
+
+def test_lookup_of_one_shape_is_the_lookup_contracted_with_its_betas(
+    body: BodyModel, fields: BodyFields
+) -> None:
+    gen = torch.Generator().manual_seed(2)
+    rest = body.shaped(torch.zeros(1, 10))[0][0]
+    # Near the skin (finest bands), farther out (coarser bands, the dense grid) and past the box.
+    scales = torch.tensor([0.005, 0.03, 0.1, 0.4, 1.5])[:, None, None]
+    points = rest + scales * torch.randn(len(scales), *rest.shape, generator=gen)
+    betas = 2 * torch.randn(10, generator=gen)
+    weights, offsets = fields.shaped(points, betas)
+    all_weights, shape_dirs, _ = fields.all_fields(points)
+    assert torch.allclose(weights, all_weights, atol=1e-6)
+    assert torch.allclose(offsets, torch.einsum("bnck,k->bnc", shape_dirs, betas), atol=1e-6)

@@ -348,3 +348,16 @@ def test_lod_variant_set_holds_every_coarser_level(
     ]
     with pytest.raises(ValueError, match="level of detail below 'low'"):
         dress(amass_layer, tmp_path / "x.usdc", method="lbs", lod="low", lod_variants=True)
+
+
+def test_batched_vertex_normals_match_one_frame_at_a_time() -> None:
+    from usd_garment.garment.library import load_template
+    from usd_garment.garment.mesh_ops import vertex_normals
+
+    low = load_template("tshirt", "low")
+    rng = np.random.default_rng(0)
+    frames = low.vertices[None] + 0.01 * rng.standard_normal((5, *low.vertices.shape))
+    batched = garment_layer.vertex_normals(frames.astype(np.float32), low.faces)
+    assert batched.shape == frames.shape and batched.dtype == np.float32
+    for t, points in enumerate(frames):
+        np.testing.assert_allclose(batched[t], vertex_normals(points, low.faces), atol=1e-4)

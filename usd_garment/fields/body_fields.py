@@ -43,6 +43,12 @@ def _add_rows(
     return [a.index_put((rows,), a[rows] + p) for a, p in zip(acc, parts, strict=True)]
 
 
+def _contracted(shape_dirs: torch.Tensor, betas: torch.Tensor) -> torch.Tensor:
+    """Grid node values of the shape blendshapes ``(R, 3·K)`` contracted with ``betas``
+    ``(K,)``: the offsets ``(R, 3)`` (m) of that body shape."""
+    return shape_dirs.reshape(-1, 3, NUM_BETAS) @ betas.to(shape_dirs)
+
+
 def _normalized(raw: torch.Tensor) -> torch.Tensor:
     """Raw weight field values ``(..., J)`` to skinning weights: ≥ 0, rows summing to 1."""
     w = raw.clamp_min(0.0)
@@ -114,15 +120,17 @@ class BodyFields(torch.nn.Module):
         found: dict[str, torch.Tensor] = {}
         for held, group in by_levels.items():
             levels = [self.field_levels[i] for i in held]
-            found |= dict(zip(group, self._cascade(flat, tuple(group), levels), strict=True))
+            cascade = self._cascade(flat, tuple(group), levels, self.fields_coarse)
+            found |= dict(zip(group, cascade, strict=True))
         return [found[n].reshape(*lead, found[n].shape[-1]) for n in names]
 
+    @staticmethod
     def _cascade(
-        self, flat: torch.Tensor, names: tuple[str, ...], levels: list[SparseGrid]
+        flat: torch.Tensor, names: tuple[str, ...], levels: list[SparseGrid], coarse: DenseGrid
     ) -> list[torch.Tensor]:
         """Values ``(M, C)`` of groups at points ``(M, 3)``: each level's values blended over the
         coarser ones' with its blend weight (1 inside its band, falling to 0 over the band's
-        outermost cell, so there is no seam where a band ends); the coarse dense grid last."""
+        outermost cell, so there is no seam where a band ends); the dense grid ``coarse`` last."""
         m = flat.shape[0]
         acc: list[torch.Tensor] | None = None
         remaining = flat.new_ones(m)  # weight left for coarser levels
@@ -136,9 +144,43 @@ class BodyFields(torch.nn.Module):
             if not todo.numel():
                 break
         if acc is None or todo.numel():
-            coarse = self.fields_coarse(flat[todo], names)
-            acc = _add_rows(acc, todo, [remaining[todo, None] * c for c in coarse])
+            values = coarse(flat[todo], names)
+            acc = _add_rows(acc, todo, [remaining[todo, None] * c for c in values])
         return acc
+
+    def _shaped_raw(
+        self, points: torch.Tensor, betas: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Raw weight field values ``(..., N, J)`` (see :meth:`weights` for their normalisation)
+        and the shape offsets B̃s(X)·β ``(..., N, 3)`` (m) of one body shape ``betas`` ``(K,)``
+        at points ``(..., N, 3)``: the values of :meth:`all_fields`, with the blendshape
+        grids contracted with β before the lookup (3 channels gathered per corner instead of
+        3K, about half the cost of looking up both groups)."""
+        lead = points.shape[:-1]
+        flat = points.reshape(-1, 3).to(self.fields_coarse.origin)
+        (raw,) = self._fields(flat, ("weights",))
+        levels = [
+            level.with_channels({"offset": _contracted(level.channel("shape_dirs"), betas)})
+            for level in self.field_levels
+            if "shape_dirs" in level.names
+        ]
+        dense = self.fields_coarse
+        coarse = DenseGrid(
+            dense.origin,
+            dense.spacing,
+            {"offset": _contracted(dense.channel("shape_dirs"), betas).reshape(*dense.shape, 3)},
+        )
+        (offsets,) = self._cascade(flat, ("offset",), levels, coarse)
+        return raw.reshape(*lead, -1), offsets.reshape(*lead, 3)
+
+    def shaped(
+        self, points: torch.Tensor, betas: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Skinning weights ``(..., N, J)`` and shape offsets B̃s(X)·β ``(..., N, 3)`` (m) of one
+        body shape ``betas`` ``(K,)`` at points ``(..., N, 3)`` (as :meth:`FieldTangent.shaped`,
+        exactly)."""
+        raw, offsets = self._shaped_raw(points, betas)
+        return _normalized(raw), offsets
 
     def weights(self, points: torch.Tensor) -> torch.Tensor:
         """Diffused skinning weights ``(..., N, 24)`` at points ``(..., N, 3)``; rows are ≥ 0 and
@@ -410,7 +452,5 @@ class FieldTangent:
             raw.addcmul_(planes[axis], delta[..., axis : axis + 1])
         far = delta.norm(dim=-1) > self.radius
         if bool(far.any()):
-            weights, shape_dirs = self.fields._fields(points[far], ("weights", "shape_dirs"))
-            offsets = shape_dirs.reshape(-1, 3, k) @ betas
-            raw[far] = torch.cat([weights, offsets], dim=-1)
+            raw[far] = torch.cat(self.fields._shaped_raw(points[far], betas), dim=-1)
         return _normalized(raw[..., :j]), raw[..., j:]

@@ -139,6 +139,13 @@ class SparseGrid(torch.nn.Module):
         values, valid, _ = self._lookup(points, names, blend=False)
         return values, valid
 
+    def with_channels(self, channels: dict[str, torch.Tensor]) -> SparseGrid:
+        """A grid over the same nodes and band holding ``channels`` (name → ``(mask.sum(), C)``)
+        instead of this one's."""
+        grid = SparseGrid(self.origin, self.spacing, self.mask, channels)
+        grid._inner = self.inner()
+        return grid
+
     def inner(self) -> torch.Tensor:
         """``(mask.sum(), 1)`` float: 1 at the masked nodes whose 26 neighbours are all masked
         (nodes outside the lattice are not), else 0; made on first use (an erosion of the

@@ -98,15 +98,15 @@ class GarmentModel(torch.nn.Module):
         ``tangent``: the fields to first order about points near ``x`` (inference: one set of
         lookups per chunk of frames instead of one per frame); None: looked up at ``x``.
         """
+        source = tangent if tangent is not None else self.fields
         if (
-            tangent is not None
+            (tangent is not None or not torch.is_grad_enabled())  # inference
             and not self.fields.has_pose_dirs
-            and bool((art.betas == art.betas[:1]).all())  # one shape (a sync: inference only)
+            and bool((art.betas == art.betas[:1]).all())  # one shape (a sync)
         ):
-            weights, offsets = tangent.shaped(x, art.betas[0])  # W̃(X), B̃s(X)·β
+            weights, offsets = source.shaped(x, art.betas[0])  # W̃(X), B̃s(X)·β
             t_g = x + offsets
             return GarmentOutput(skin(t_g, weights, art.transforms), t_g, weights)
-        source = tangent if tangent is not None else self.fields
         weights, shape_dirs, pose_dirs = source.all_fields(x)  # W̃(X), B̃s(X), B̃p(X)
         t_g = x + torch.einsum("bk,bnck->bnc", art.betas, shape_dirs)  # Eq. 9
         if pose_dirs is not None:
