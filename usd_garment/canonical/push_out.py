@@ -47,14 +47,15 @@ def push_out_canonical(
     for _ in range(passes):
         if candidates.numel() == 0:
             break
+        with torch.no_grad():  # the candidates' values first: few of them need a gradient
+            near = sdf(flat[candidates]) < epsilon
+        if not bool(near.any()):
+            break
+        candidates = candidates[near]
         with torch.enable_grad():
             p = flat[candidates].requires_grad_(True)
             d = sdf(p)
-            near = d.detach() < epsilon
             (grad,) = torch.autograd.grad(d.sum(), p)
-        if not bool(near.any()):
-            break
-        candidates, grad, d = candidates[near], grad[near], d.detach()[near]
         normal = grad / grad.norm(dim=-1, keepdim=True).clamp_min(1e-12)
-        flat[candidates] += (epsilon - d).unsqueeze(-1) * normal
+        flat[candidates] += (epsilon - d.detach()).unsqueeze(-1) * normal
     return out
