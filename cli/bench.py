@@ -26,7 +26,7 @@ from usd_garment.methods.simulation import SimulationMethod
 from usd_garment.training.dataset import dataset_layers
 
 #: Methods benched when none is named (the learned one only where a model ships).
-DEFAULT_METHODS = ("learned", "learned+postprocess", "lbs", "lbs+postprocess")
+DEFAULT_METHODS = ("learned", "learned+canonical", "learned+postprocess", "lbs", "lbs+postprocess")
 
 
 def _labelled_models(values: tuple[str, ...]) -> list[tuple[str, Path]]:
@@ -122,8 +122,8 @@ def _plain(value: object) -> object:
     "names",
     multiple=True,
     type=click.Choice(available_methods()),
-    help="Methods to bench (repeat); default: learned and learned+postprocess (where a model "
-    "ships), lbs, lbs+postprocess.",
+    help="Methods to bench (repeat); default: learned, learned+canonical and learned+postprocess "
+    "(where a model ships), lbs, lbs+postprocess.",
 )
 @click.option(
     "--model",
