@@ -34,6 +34,7 @@ from usd_garment.training.dataset import (
     MANIFEST_NAME,
     SPLITS,
     DatasetConfig,
+    check_splits,
     make_dataset,
     read_manifest,
 )
@@ -185,13 +186,11 @@ def floor(
     each sequence's targets posed back by the garment model, beside the simulation, both
     measured against the posed body (winding number: inside forced / elsewhere)."""
     with user_errors():
+        splits = split_list(split_names)
+        check_splits(splits)
         data = load_canonical_set(canonical)
         body = load_body_model(body_model)
         body_fields = load_body_fields(fields)
-        splits = split_list(split_names)
-        unknown = sorted(set(splits) - set(SPLITS))
-        if unknown:
-            raise click.BadParameter(f"unknown split(s) {unknown}", param_hint="--split")
         total = sum(1 for s in data.splits if s in splits)
         with FrameProgress("floor", unit="seq") as bar:
             bar.on_read(total)
