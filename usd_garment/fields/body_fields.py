@@ -439,7 +439,7 @@ class FieldTangent:
         before the frames are, so a frame costs J + 3 channels instead of J + 3K.
         """
         n, j, k = self.anchor.shape[0], self.sizes[0], NUM_BETAS
-        shape_value = self.value[:, j : j + 3 * k].reshape(n, 3, k) @ betas  # (N, 3)
+        shape_value = _contracted(self.value[:, j : j + 3 * k], betas)  # (N, 3)
         shape_derivative = torch.einsum(
             "nckd,k->ncd", self.derivative[:, j : j + 3 * k].reshape(n, 3, k, 3), betas
         )  # (N, 3, 3)
