@@ -16,11 +16,14 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import igl
 import numpy as np
 import torch
 from scipy.spatial import cKDTree
+
+if TYPE_CHECKING:
+    import igl
 
 #: Body triangles (nearest by centroid) searched for each point's closest point.
 NEAREST_FACES = 12
@@ -185,7 +188,10 @@ def _closest_on_triangles(
 def winding_tree(vertices: np.ndarray, faces: np.ndarray) -> igl.FastWindingNumberBVH:
     """libigl's fast-winding-number hierarchy of the triangle mesh ``vertices`` ``(V, 3)`` (m),
     ``faces`` ``(F, 3)``, built once for several queries (its build is most of a query's cost;
-    about 5 MB for the body)."""
+    about 5 MB for the body). libigl is imported here, at the first tree: the commands that
+    test no point against the body (``dress``'s default) do not load it."""
+    import igl
+
     tree = igl.FastWindingNumberBVH()
     tree.init(
         np.ascontiguousarray(vertices, dtype=np.float64),

@@ -8,7 +8,8 @@ pass halves ε: the vertex ends up between the two."""
 
 from __future__ import annotations
 
-import igl
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from usd_garment.eval.body_distance import (
@@ -17,6 +18,9 @@ from usd_garment.eval.body_distance import (
     signed_distance,
     winding_tree,
 )
+
+if TYPE_CHECKING:
+    import igl
 
 #: Distance outside the body that pushed vertices are moved to (m); DESIGN.md, 2 mm.
 PUSH_OUT_EPS = 2e-3
