@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 from click.testing import CliRunner
 
 from usd_garment.body.model import BodyModel
@@ -105,9 +106,56 @@ def test_train_then_dress(body_model: BodyModel, synthetic_body: BodyModel, tmp_
     assert code == 0 and (tmp_path / "fig4.png").is_file()
 
 
-def test_latents_return_to_the_input_frames() -> None:
-    import torch
+def _log_figures(model: Path) -> list[dict[str, float]]:
+    """The figures of each line of the run's ``train.log`` (times and learning rates left out)."""
+    rows = []
+    for line in (model / "train.log").read_text().splitlines():
+        pairs = (word.split("=") for word in line.split()[4:])
+        rows.append({k: float(v) for k, v in pairs if k not in ("seconds", "lr")})
+    return rows
 
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
+def test_training_on_cuda_is_the_training_on_the_cpu(
+    body_model: BodyModel, synthetic_body: BodyModel, tmp_path: Path
+) -> None:
+    """``train all --device cuda`` trains what the CPU trains (every logged figure of every
+    epoch within 2 %, shares of vertices within 0.05 points), and its model directory loads and
+    dresses on the CPU."""
+    if body_model is synthetic_body:
+        pytest.skip("needs the embedded default body and its fields")
+    data, config = tmp_path / "set.npz", tmp_path / "tiny.json"
+    tiny_canonical_set(body_model, data)
+    config.write_text(json.dumps(TINY))
+    figures = {}
+    for device in ("cpu", "cuda"):
+        model = tmp_path / device
+        code, output = _run(["train", "all", "--data", data, "--out", model, "--config", config,
+                             "--device", device])  # fmt: skip
+        assert code == 0, output
+        figures[device] = _log_figures(model)
+        assert json.loads((model / "model.json").read_text())["command"].endswith(
+            f"--device {device} --config {config}"
+        )
+    assert len(figures["cuda"]) == len(figures["cpu"]) == 6
+    for cpu, cuda in zip(figures["cpu"], figures["cuda"], strict=True):
+        assert cpu.keys() == cuda.keys()
+        for key in cpu:
+            atol = 0.05 if key.endswith("_pct") else 1e-6
+            assert cuda[key] == pytest.approx(cpu[key], rel=0.02, abs=atol), key
+    body = tmp_path / "walk.usda"
+    write_body_layer(body, make_motion("walk", 5, 30.0, seed=5, body=body_model), body_model)
+    points = {}
+    for device in ("cpu", "cuda"):
+        out = tmp_path / f"{device}.usdc"
+        code, output = _run(["dress", body, "-o", out, "--model", tmp_path / device,
+                             "--lod", "low"])  # fmt: skip
+        assert code == 0, output
+        points[device] = read_garment_layer(out)[0]
+    np.testing.assert_allclose(points["cuda"], points["cpu"], atol=2e-3)
+
+
+def test_latents_return_to_the_input_frames() -> None:
     values = torch.arange(4, dtype=torch.float32)[:, None]  # at 30 fps: t = 0, 1/30, 2/30, 3/30
     at_60 = to_frames(values, 60.0, 7)
     np.testing.assert_allclose(at_60[:, 0].numpy(), [0, 0.5, 1, 1.5, 2, 2.5, 3])
