@@ -171,7 +171,7 @@ def test_feet_stay_on_the_floor(kind: str, posed: dict[str, BodyOutput]) -> None
     low = posed[kind].vertices[..., 1].min(dim=1).values.double().numpy()
     floor = low[0]
     assert low.min() > floor - 0.015  # nothing sinks more than 1.5 cm into the floor
-    if kind not in ("run", "jumping_jacks"):
+    if kind not in ("run", "jumping_jacks", "hop"):
         assert np.abs(low - floor).max() < 0.015  # and something always touches it
 
 

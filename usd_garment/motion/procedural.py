@@ -277,6 +277,35 @@ def _jumping_jacks(t: np.ndarray, rng: np.random.Generator) -> _Plan:
     return _Plan(euler, hop=hop)
 
 
+def _hop(t: np.ndarray, rng: np.random.Generator) -> _Plan:
+    """Hopping in place, on both feet or on one: crouch, take off with the arms swinging
+    forward and up, fly (the soles up to 8-20 cm), land into the next crouch."""
+    euler = np.zeros((t.size, NUM_JOINTS, 3))
+    phase = _TWO_PI * rng.uniform(1.1, 1.6) * t + rng.uniform(0.0, _TWO_PI)
+    crouch = rng.uniform(0.35, 0.7) * _bump(phase + np.pi / 2.0, 2.0)  # deepest before take-off
+    flight = _bump(phase - np.pi / 2.0, 2.0)  # 1 at the top of the hop
+    thigh, shank, pitch = 1.3 * crouch, -0.55 * crouch, 0.35 * crouch  # world angles (rad)
+    _set(euler, "pelvis", x=pitch)
+    for name in ("spine1", "spine2", "spine3"):
+        _set(euler, name, x=0.08 * crouch)
+    sides = ("left", "right")
+    if rng.random() < 0.5:  # on one foot: the other thigh a little forward, knee bent
+        lifted = sides[rng.integers(2)]
+        _set_side(euler, lifted, "hip", x=-rng.uniform(0.1, 0.4))
+        _set_side(euler, lifted, "knee", x=rng.uniform(0.9, 1.4))
+        sides = tuple(s for s in sides if s != lifted)
+    for s in sides:
+        _set_side(euler, s, "hip", x=-thigh - pitch, z=0.05)
+        _set_side(euler, s, "knee", x=thigh - shank)
+        _set_side(euler, s, "ankle", x=shank + 0.35 * flight, z=-0.05)
+    hang, swing = rng.uniform(1.15, 1.3), rng.uniform(0.4, 0.9)
+    arm = swing * (flight - crouch / 0.7)  # forward and up in the air, back in the crouch
+    for s in ("left", "right"):
+        _set_side(euler, s, "shoulder", y=-arm, z=-hang * (1.0 - 0.3 * flight))
+        _set_side(euler, s, "elbow", y=-0.3)
+    return _Plan(euler, yaw_rate=rng.uniform(-0.2, 0.2), hop=rng.uniform(0.08, 0.2) * flight)
+
+
 def _random_smooth(t: np.ndarray, rng: np.random.Generator) -> _Plan:
     """Every joint angle a sum of three random sinusoids about a random centre, saturated
     smoothly inside its limits; the heading turns slowly."""
@@ -309,6 +338,7 @@ _GENERATORS: dict[str, Callable[[np.ndarray, np.random.Generator], _Plan]] = {
     "squat": _squat,
     "jumping_jacks": _jumping_jacks,
     "random_smooth": _random_smooth,
+    "hop": _hop,
 }
 
 #: The motion kinds :func:`make_motion` knows, with a one-line description each.
@@ -322,6 +352,7 @@ MOTION_KINDS: dict[str, str] = {
     "squat": "squats with flat feet, hips back, arms forward or down",
     "jumping_jacks": "jumping the feet apart while the arms swing over the head, and back",
     "random_smooth": "every joint a smooth random trajectory within its limits, slow turning",
+    "hop": "hopping in place on both feet or on one: crouch, take-off, flight, landing",
 }
 
 
