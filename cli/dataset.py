@@ -31,6 +31,7 @@ from usd_garment.garment.template import GARMENT_NAMES
 from usd_garment.sim.material import ClothMaterial
 from usd_garment.training.data_quality import GROUPINGS, GroupQuality, dataset_quality
 from usd_garment.training.dataset import (
+    DATASET_KINDS,
     MANIFEST_NAME,
     SPLITS,
     DatasetConfig,
@@ -80,6 +81,13 @@ def dataset() -> None:
     "validation and test motions come from another dataset (captures keep their split).",
 )
 @click.option(
+    "--kinds",
+    default=",".join(DATASET_KINDS),
+    show_default=True,
+    help="Comma-separated procedural motion kinds the motions rotate through "
+    "('usd-garment motion kinds' lists them; 'hop' is not in the default).",
+)
+@click.option(
     "--capture",
     "captures",
     multiple=True,
@@ -119,6 +127,7 @@ def make(
     shape_sigma: float,
     open_shoulders: bool,
     train_only: bool,
+    kinds: str,
     captures: tuple[str, ...],
     capture_shapes: int,
     substeps: int,
@@ -150,7 +159,7 @@ def make(
                 seed=seed, substeps=substeps, iterations=iterations, material=fabric,
                 shape_sigma=shape_sigma, open_shoulders=open_shoulders, train_only=train_only,
                 captures=tuple(_capture(text) for text in captures),
-                capture_shapes=capture_shapes,
+                capture_shapes=capture_shapes, kinds=tuple(k for k in kinds.split(",") if k),
             )  # fmt: skip
             splits = split_list(split_names)
             manifest = make_dataset(

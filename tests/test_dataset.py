@@ -169,6 +169,26 @@ def test_train_only_puts_every_procedural_motion_in_train(tmp_path: Path) -> Non
     assert dataset_module._fixed(before) == dataset_module._fixed(DatasetConfig().to_json())
 
 
+def test_kinds_choose_the_motions_and_keep_the_committed_plans() -> None:
+    """``kinds`` picks the procedural motions; by default the plans of the committed datasets
+    (v4, v4x: made before "hop" existed) come out as their manifests list them."""
+    repo = Path(__file__).resolve().parents[1] / "docs" / "datasets"
+    for name, config in (
+        ("tshirt_v4", DatasetConfig(motions=10, shapes=3, seed=0)),
+        ("tshirt_v4x", DatasetConfig(motions=10, shapes=3, seed=1, train_only=True)),
+    ):
+        listed = json.loads((repo / f"{name}_manifest.json").read_text())["sequences"]
+        kinds = {e["name"]: e["motion_kind"] for e in listed if e["motion_kind"] != "capture"}
+        assert {s.name: s.motion_kind for s in plan_sequences(config)} == kinds, name
+    hops = plan_sequences(DatasetConfig(motions=4, shapes=2, seed=2, kinds=("hop",)))
+    assert {s.motion_kind for s in hops} == {"hop"} and len({s.motion_seed for s in hops}) == 4
+    assert "hop" not in {s.motion_kind for s in plan_sequences(DatasetConfig(motions=30))}
+    with pytest.raises(ValueError, match="unknown motion kinds"):
+        DatasetConfig(kinds=("hop", "cartwheel"))
+    before = {k: v for k, v in DatasetConfig().to_json().items() if k != "kinds"}
+    assert dataset_module._fixed(before) == dataset_module._fixed(DatasetConfig().to_json())
+
+
 def test_a_captured_body_layer_is_simulated_whole(tmp_path: Path, body_model: BodyModel) -> None:
     capture = tmp_path / "capture.usda"
     write_body_layer(capture, make_motion("walk", 8, 60.0, seed=2, body=body_model), body_model)

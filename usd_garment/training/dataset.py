@@ -2,11 +2,12 @@
 shapes, one SMPL body layer and one simulated garment layer per (motion, shape) pair, listed in a
 JSON manifest.
 
-Motions rotate through ``MOTION_KINDS`` in a seeded order, each with its own seed, arms free to
-hang against the trunk unless ``open_shoulders``; captures (BVH files, or USD body layers such as
-``import-amass`` writes) follow, each played whole at the dataset's frame rate with the split it
-was given. Shape 0 is the mean body (β = 0), the others come from ``random_betas``. The split
-into train / validation / test is by motion, so test motions are never seen in training.
+Motions rotate through the config's kinds (``DATASET_KINDS`` by default) in a seeded order, each
+with its own seed, arms free to hang against the trunk unless ``open_shoulders``; captures (BVH
+files, or USD body layers such as ``import-amass`` writes) follow, each played whole at the
+dataset's frame rate with the split it was given. Shape 0 is the mean body (β = 0), the others come
+from ``random_betas``. The split into train / validation / test is by motion, so test motions are
+never seen in training.
 Sequences run one per worker process (Warp runs CPU kernels on one thread); the manifest is
 rewritten after each one, so an interrupted run resumes where it stopped. A sequence that fails
 its simulation checks is marked "bad" and its files are removed.
@@ -47,6 +48,11 @@ MANIFEST_NAME = "manifest.json"
 MANIFEST_FORMAT = 1
 #: The splits of a dataset, by motion.
 SPLITS = ("train", "validation", "test")
+#: The motion kinds of a dataset unless its config names others: every kind of
+#: ``MOTION_KINDS`` that existed when datasets v3 and v4 were made, in that order (a kind added
+#: later, such as "hop", joins only when asked for, so those datasets' plans stay as they were).
+DATASET_KINDS = ("walk", "run", "arm_raise", "arm_swing", "torso_twist", "torso_bend", "squat",
+                 "jumping_jacks", "random_smooth")  # fmt: skip
 #: Shares of the motions in the validation and test splits (the rest is train).
 VALIDATION_SHARE = TEST_SHARE = 0.15
 #: Called after each sequence with its manifest entry, sequences done and sequences to do.
@@ -72,6 +78,7 @@ class DatasetConfig:
         capture_shapes: how many of the shapes each capture is simulated on.
         train_only: every procedural motion goes to the train split (more training data for a
             model whose held-out motions come from another dataset); captures keep theirs.
+        kinds: the procedural motion kinds the motions rotate through (``MOTION_KINDS``).
     """
 
     garment: str = "tshirt"
@@ -89,6 +96,7 @@ class DatasetConfig:
     captures: tuple[tuple[str, str], ...] = ()
     capture_shapes: int = 1
     train_only: bool = False
+    kinds: tuple[str, ...] = DATASET_KINDS
 
     def __post_init__(self) -> None:
         if self.garment not in GARMENT_NAMES:
@@ -99,6 +107,9 @@ class DatasetConfig:
             raise ValueError("motions, shapes and frames must be >= 1 and fps > 0")
         if not self.shape_sigma > 0:
             raise ValueError("shape_sigma must be > 0")
+        unknown = [k for k in self.kinds if k not in MOTION_KINDS]
+        if unknown or not self.kinds:
+            raise ValueError(f"unknown motion kinds {unknown} ({', '.join(MOTION_KINDS)})")
         if not 1 <= self.capture_shapes <= self.shapes:
             raise ValueError(f"capture_shapes must be in [1, {self.shapes}]")
         for path, split in self.captures:
@@ -111,6 +122,7 @@ class DatasetConfig:
         values = asdict(self)
         values["material"] = self.material.to_dict()
         values["captures"] = [list(c) for c in self.captures]
+        values["kinds"] = list(self.kinds)
         return values
 
     def method(self) -> SimulationMethod:
@@ -166,9 +178,9 @@ def motion_splits(motions: int, seed: int) -> list[str]:
 
 def plan_sequences(config: DatasetConfig) -> list[SequenceSpec]:
     """The dataset's sequences, motion-major. Motion i has kind ``order[i mod K]`` of a seeded
-    permutation of the K kinds and its own seed; shape 0 is β = 0. The plan of N motions × M
-    shapes starts with that of fewer motions or shapes made with the same seed."""
-    kinds = list(MOTION_KINDS)
+    permutation of the config's K kinds and its own seed; shape 0 is β = 0. The plan of N
+    motions × M shapes starts with that of fewer motions or shapes made with the same seed."""
+    kinds = list(config.kinds)
     order = np.random.default_rng([config.seed, 0]).permutation(len(kinds))
     shapes = [np.zeros(NUM_BETAS, dtype=np.float32)] + [
         random_betas(np.random.default_rng([config.seed, 1, j]), config.shape_sigma)
@@ -273,10 +285,10 @@ def run_sequence(folder: str, config: DatasetConfig, spec: SequenceSpec) -> dict
 def _fixed(config: dict[str, Any]) -> dict[str, Any]:
     """A config without the motion, shape and capture lists: the plan of more motions, shapes or
     captures starts with that of fewer, so a dataset can be resumed with more (a manifest made
-    before ``train_only`` existed had none)."""
+    before ``train_only`` or ``kinds`` existed had none: it has the defaults)."""
     return {
         k: v
-        for k, v in {"train_only": False, **config}.items()
+        for k, v in {"train_only": False, "kinds": list(DATASET_KINDS), **config}.items()
         if k not in ("motions", "shapes", "captures", "capture_shapes")
     }
 
