@@ -8,7 +8,6 @@ from pathlib import Path
 import click
 import numpy as np
 import torch
-import trimesh
 
 from usd_garment.atomic import atomic_output
 from usd_garment.body import default_body_path, load_body_model
@@ -81,6 +80,8 @@ def export(body_model: Path | None, betas: str | None, pose_npz: Path | None, ou
     values = parse_betas(betas)
     shape = torch.tensor(as_betas(values if values is not None else []), dtype=torch.float32)
     with user_errors():
+        import trimesh
+
         pose = torch.zeros(1, 24, 3)
         if pose_npz is not None:
             pose[0] = torch.from_numpy(_first_pose(pose_npz))

@@ -8,7 +8,6 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
-import trimesh
 from scipy import sparse
 
 from usd_garment.garment.library import load_template
@@ -17,7 +16,10 @@ from usd_garment.garment.template import LODS, GarmentTemplate
 
 def transfer_weights(source: GarmentTemplate, target: GarmentTemplate) -> sparse.csr_matrix:
     """``(N_target, N_source)`` weights, three per row summing to 1: the barycentric coordinates
-    of each target vertex's closest point on the source's rest surface."""
+    of each target vertex's closest point on the source's rest surface (trimesh is imported
+    here: most commands never need it)."""
+    import trimesh
+
     mesh = trimesh.Trimesh(source.vertices, source.faces, process=False)
     closest, _, triangle = trimesh.proximity.closest_point(mesh, target.vertices)
     corners = source.faces[triangle]  # (N_t, 3)

@@ -6,7 +6,6 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-import trimesh
 
 from usd_garment.body.model import BodyModel
 from usd_garment.garment.hull import points_inside
@@ -28,6 +27,8 @@ def clearance(
 
     The sign comes from ray crossing counts (``points_inside``), exact for a watertight mesh.
     """
+    import trimesh
+
     mesh = trimesh.Trimesh(vertices, faces, process=False)
     closest, distance, _ = trimesh.proximity.closest_point(mesh, points)
     return np.where(points_inside(vertices, faces, points), -distance, distance), closest
