@@ -13,7 +13,12 @@ from tqdm import tqdm
 
 from usd_garment.body.io import load_body_model
 from usd_garment.canonical.dataset import load_canonical_set
-from usd_garment.canonical.floor import SequenceFloor, representation_floor
+from usd_garment.canonical.floor import (
+    NetworkFloor,
+    SequenceFloor,
+    network_floor,
+    representation_floor,
+)
 from usd_garment.cli.errors import user_errors
 from usd_garment.cli.options import (
     FrameProgress,
@@ -187,27 +192,53 @@ def make(
 @splits_option("Comma-separated splits to measure.")
 @body_model_option
 @fields_option
+@click.option(
+    "--model", "model_dir", type=click.Path(file_okay=False, path_type=Path), default=None,
+    help="A trained model directory: also split its error on the targets into the decoder's "
+    "best fit and the networks' prediction (canonical space).",
+)  # fmt: skip
 @json_option("Print every sequence's figures as JSON.")
 def floor(
-    canonical: Path, split_names: str, body_model: Path | None, fields: Path | None, as_json: bool
+    canonical: Path,
+    split_names: str,
+    body_model: Path | None,
+    fields: Path | None,
+    model_dir: Path | None,
+    as_json: bool,
 ) -> None:
     """How close a model trained on the canonical set CANONICAL can come to its simulations:
     each sequence's targets posed back by the garment model, beside the simulation, both
-    measured against the posed body (winding number: inside forced / elsewhere)."""
+    measured against the posed body (winding number: inside forced / elsewhere); with --model,
+    how close that model's decoder can come to the targets and how close its networks do."""
     with user_errors():
         splits = split_list(split_names)
         check_splits(splits)
         data = load_canonical_set(canonical)
         body = load_body_model(body_model)
         body_fields = load_body_fields(fields)
+        model = None
+        if model_dir is not None:
+            from usd_garment.methods.learned_model import load_learned_model
+
+            model = load_learned_model(model_dir, body)
         total = sum(1 for s in data.splits if s in splits)
         with FrameProgress("floor", unit="seq") as bar:
             bar.on_read(total)
             rows = representation_floor(data, body, body_fields, splits, bar.progress)
+        networks: list[NetworkFloor] = []
+        if model is not None:
+            with FrameProgress("networks", unit="seq") as bar:
+                bar.on_read(total)
+                networks = network_floor(data, model, splits, bar.progress)
     if as_json:
-        click.echo(json.dumps([row.to_json() for row in rows], indent=2))
+        entries = [row.to_json() for row in rows]
+        for entry, net in zip(entries, networks, strict=False):
+            entry |= {"decoder_fit_mm": net.decoder_fit_mm, "networks_mm": net.networks_mm}
+        click.echo(json.dumps(entries, indent=2))
         return
     click.echo(_floor_table(rows))
+    if networks:
+        click.echo(_networks_table(networks))
 
 
 def _floor_table(rows: list[SequenceFloor]) -> str:
@@ -234,6 +265,26 @@ def _floor_table(rows: list[SequenceFloor]) -> str:
             f"| {pct('reposed', 'inside_forced_share')} / "
             f"{pct('reposed', 'inside_elsewhere_share')}"
         )
+
+    for row in rows:
+        lines.append(line(Path(row.source).stem, row.split, [row]))
+    for split in SPLITS:
+        group = [r for r in rows if r.split == split]
+        if group:
+            lines.append(line("all", split, group))
+    return "\n".join(lines)
+
+
+def _networks_table(rows: list[NetworkFloor]) -> str:
+    """Per sequence, then frame-weighted means per split: the decoder's best fit and the
+    networks' prediction against the targets (mm, canonical space)."""
+    lines = ["sequence | split | frames | decoder best fit mm | networks mm"]
+
+    def line(name: str, split: str, group: list[NetworkFloor]) -> str:
+        w = np.array([r.frames for r in group], dtype=float)
+        fit = np.dot(w, [r.decoder_fit_mm for r in group]) / w.sum()
+        net = np.dot(w, [r.networks_mm for r in group]) / w.sum()
+        return f"{name} | {split} | {int(w.sum())} | {fit:.2f} | {net:.2f}"
 
     for row in rows:
         lines.append(line(Path(row.source).stem, row.split, [row]))

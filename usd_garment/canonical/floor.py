@@ -6,6 +6,10 @@ each frame) and measuring them like a method's output against the posed body giv
 any such model's figures: the collisions that the canonical representation itself leaves (where
 no X poses onto the simulated cloth: the reprojection error's tail, and the collision term that
 keeps X out of the canonical body), beside the simulation's own.
+
+For a trained model, :func:`network_floor` splits its error on the same targets in canonical
+space: the decoder's best fit (the latent codes that come closest, :func:`fit_latents`: what the
+subspace can represent) against the regressor's codes decoded (what the networks predict).
 """
 
 from __future__ import annotations
@@ -22,6 +26,10 @@ from usd_garment.canonical.dataset import CanonicalSet
 from usd_garment.eval.metrics import evaluate_garment
 from usd_garment.fields.body_fields import BodyFields
 from usd_garment.garment.model import GarmentModel
+from usd_garment.generative.fit import fit_latents
+from usd_garment.methods.learned import predict_latents
+from usd_garment.methods.learned_model import LearnedModel
+from usd_garment.motion.sequence import SmplMotion
 from usd_garment.usd.garment_read import read_garment_layer
 
 #: Frames posed at once (bounds the ``(t, N, channels)`` temporaries of M_G).
@@ -50,6 +58,77 @@ class SequenceFloor:
 
     def to_json(self) -> dict[str, Any]:
         return dict(self.__dict__)
+
+
+@dataclass(frozen=True)
+class NetworkFloor:
+    """A trained model's canonical-space error on one sequence of a canonical set (means over
+    its frames and vertices, mm).
+
+    Attributes:
+        source, split, frames: as :class:`SequenceFloor`'s.
+        decoder_fit_mm: distance from the decoder's best fit to the targets X.
+        networks_mm: distance from the decoded regressor codes to X.
+    """
+
+    source: str
+    split: str
+    frames: int
+    decoder_fit_mm: float
+    networks_mm: float
+
+    def to_json(self) -> dict[str, Any]:
+        return dict(self.__dict__)
+
+
+def _chosen(data: CanonicalSet, splits: Sequence[str] | None) -> list[int]:
+    return [s for s in range(data.num_sequences) if splits is None or data.splits[s] in splits]
+
+
+def network_floor(
+    data: CanonicalSet,
+    model: LearnedModel,
+    splits: Sequence[str] | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> list[NetworkFloor]:
+    """The decoder's best fit and the networks' prediction of each sequence of ``data`` in
+    ``splits`` (all by default), against its targets, in canonical space; the fit starts from
+    the regressor's codes.
+
+    Raises:
+        ValueError: the model's garment has another vertex count than the set's.
+    """
+    if model.vertices != data.canonical.shape[1]:
+        raise ValueError(
+            f"the model is of {model.vertices} vertices, the set's garments "
+            f"{data.canonical.shape[1]}"
+        )
+    out = []
+    for done, s in enumerate(_chosen(data, splits), 1):
+        frames = data.sequence(s)
+        x = torch.as_tensor(data.canonical[frames]).float()
+        motion = SmplMotion(
+            betas=np.asarray(data.betas[s], dtype=np.float32),
+            pose=np.asarray(data.pose[frames], dtype=np.float32),
+            trans=np.asarray(data.trans[frames], dtype=np.float32),
+            fps=float(data.fps[s]),
+        )
+        z = predict_latents(model, motion)
+        fit = fit_latents(model.vae, x, init=z)
+        with torch.no_grad():
+            networks, best = model.vae.decode(z), model.vae.decode(fit)
+        out.append(
+            NetworkFloor(
+                source=data.sources[s],
+                split=data.splits[s],
+                frames=frames.stop - frames.start,
+                decoder_fit_mm=1e3 * float((best - x).norm(dim=-1).mean()),
+                networks_mm=1e3 * float((networks - x).norm(dim=-1).mean()),
+            )
+        )
+        if progress is not None:
+            progress(done)
+    return out
 
 
 def pose_canonical(
@@ -89,9 +168,8 @@ def representation_floor(
     """
     model = GarmentModel(body, fields)
     faces = body.faces.numpy()
-    chosen = [s for s in range(data.num_sequences) if splits is None or data.splits[s] in splits]
     out = []
-    for done, s in enumerate(chosen, 1):
+    for done, s in enumerate(_chosen(data, splits), 1):
         frames = data.sequence(s)
         simulated, _, _ = read_garment_layer(data.sources[s])
         if simulated.shape != data.canonical[frames].shape:

@@ -86,6 +86,16 @@ def learned_method(name: str, model: str | Path | None = None) -> LearnedMethod:
     raise ValueError(f"'{name}' is not a learned method ({', '.join(LEARNED_METHODS)})")
 
 
+@torch.no_grad()
+def predict_latents(model: LearnedModel, motion: SmplMotion) -> torch.Tensor:
+    """The regressor's latent codes ``(T, L)`` for the frames of ``motion``: the motion
+    descriptor γ at the model's 30 fps, the GRU, the codes interpolated back to the motion's
+    frames (:func:`to_frames`)."""
+    gamma, _ = describe_motion(motion, model.pose_codec)
+    betas = torch.as_tensor(motion.betas, dtype=torch.float32)
+    return to_frames(model.regressor.predict(gamma, betas), motion.fps, motion.num_frames)
+
+
 def to_frames(values: torch.Tensor, fps: float, count: int) -> torch.Tensor:
     """``values`` ``(T', ...)`` sampled at :data:`MODEL_FPS` from time 0, linearly interpolated
     at ``count`` frames sampled at ``fps`` from time 0 (clamped at the last sample)."""
@@ -236,9 +246,7 @@ class LearnedMethod:
         trans = torch.as_tensor(motion.trans, dtype=torch.float32)
         t_frames = motion.num_frames
         lap("load")
-        with torch.no_grad():
-            gamma, _ = describe_motion(motion, model.pose_codec)
-            z = to_frames(model.regressor.predict(gamma, betas), motion.fps, t_frames)
+        z = predict_latents(model, motion)
         lap("regressor")
         for s in range(0, t_frames, chunk):
             e = min(s + chunk, t_frames)
