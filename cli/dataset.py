@@ -4,8 +4,9 @@ body shapes) with a manifest."""
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import click
 import numpy as np
@@ -241,13 +242,26 @@ def floor(
         click.echo(_networks_table(networks))
 
 
+Row = TypeVar("Row", SequenceFloor, NetworkFloor)
+
+
+def _split_table(header: str, rows: list[Row], line: Callable[[str, str, list[Row]], str]) -> str:
+    """``header``, one ``line`` per sequence, then one per split over its sequences."""
+    lines = [header] + [line(Path(r.source).stem, r.split, [r]) for r in rows]
+    for split in SPLITS:
+        group = [r for r in rows if r.split == split]
+        if group:
+            lines.append(line("all", split, group))
+    return "\n".join(lines)
+
+
 def _floor_table(rows: list[SequenceFloor]) -> str:
     """Per sequence, then frame-weighted means per split: reprojection error (mm) and the
     inside shares (%) of the simulation and of the targets posed back."""
-    lines = [
+    header = (
         "sequence | split | frames | reprojection mm | simulation forced / elsewhere % "
         "| posed back forced / elsewhere %"
-    ]
+    )
 
     def line(name: str, split: str, group: list[SequenceFloor]) -> str:
         w = np.array([r.frames for r in group], dtype=float)
@@ -266,19 +280,13 @@ def _floor_table(rows: list[SequenceFloor]) -> str:
             f"{pct('reposed', 'inside_elsewhere_share')}"
         )
 
-    for row in rows:
-        lines.append(line(Path(row.source).stem, row.split, [row]))
-    for split in SPLITS:
-        group = [r for r in rows if r.split == split]
-        if group:
-            lines.append(line("all", split, group))
-    return "\n".join(lines)
+    return _split_table(header, rows, line)
 
 
 def _networks_table(rows: list[NetworkFloor]) -> str:
     """Per sequence, then frame-weighted means per split: the decoder's best fit and the
     networks' prediction against the targets (mm, canonical space)."""
-    lines = ["sequence | split | frames | decoder best fit mm | networks mm"]
+    header = "sequence | split | frames | decoder best fit mm | networks mm"
 
     def line(name: str, split: str, group: list[NetworkFloor]) -> str:
         w = np.array([r.frames for r in group], dtype=float)
@@ -286,13 +294,7 @@ def _networks_table(rows: list[NetworkFloor]) -> str:
         net = np.dot(w, [r.networks_mm for r in group]) / w.sum()
         return f"{name} | {split} | {int(w.sum())} | {fit:.2f} | {net:.2f}"
 
-    for row in rows:
-        lines.append(line(Path(row.source).stem, row.split, [row]))
-    for split in SPLITS:
-        group = [r for r in rows if r.split == split]
-        if group:
-            lines.append(line("all", split, group))
-    return "\n".join(lines)
+    return _split_table(header, rows, line)
 
 
 @dataset.command("summary")
