@@ -236,6 +236,26 @@ def _torso_bend(t: np.ndarray, rng: np.random.Generator) -> _Plan:
     return _Plan(euler)
 
 
+def _crouch(
+    euler: np.ndarray,
+    depth: np.ndarray,
+    sides: tuple[str, ...],
+    splay: object = 0.0,
+    point: object = 0.0,
+) -> None:
+    """Bend the legs of ``sides`` into a crouch of ``depth`` ``(T,)`` (0 standing, ~1 a deep
+    squat) with the soles level: thighs forward, shanks back, the pelvis and spine leaning
+    forward; ``splay`` (rad) turns the knees outwards, ``point`` (rad) points the toes."""
+    thigh, shank, pitch = 1.3 * depth, -0.55 * depth, 0.35 * depth  # world angles (rad)
+    _set(euler, "pelvis", x=pitch)
+    for s in sides:
+        _set_side(euler, s, "hip", x=-thigh - pitch, z=splay)
+        _set_side(euler, s, "knee", x=thigh - shank)
+        _set_side(euler, s, "ankle", x=shank + point, z=-np.asarray(splay))
+    for name in ("spine1", "spine2", "spine3"):
+        _set(euler, name, x=0.08 * depth)
+
+
 def _squat(t: np.ndarray, rng: np.random.Generator) -> _Plan:
     """Squats with flat feet: knees forward, hips back, trunk leaning, arms forward or down."""
     euler = np.zeros((t.size, NUM_JOINTS, 3))
@@ -243,14 +263,7 @@ def _squat(t: np.ndarray, rng: np.random.Generator) -> _Plan:
     depth = depth_max * (
         0.5 - 0.5 * np.cos(_TWO_PI * rng.uniform(0.3, 0.5) * t + rng.uniform(0, 7))
     )
-    thigh, shank, pitch = 1.3 * depth, -0.55 * depth, 0.35 * depth  # world angles (rad)
-    _set(euler, "pelvis", x=pitch)
-    for s in ("left", "right"):
-        _set_side(euler, s, "hip", x=-thigh - pitch, z=0.15 * depth)
-        _set_side(euler, s, "knee", x=thigh - shank)
-        _set_side(euler, s, "ankle", x=shank, z=-0.15 * depth)
-    for name in ("spine1", "spine2", "spine3"):
-        _set(euler, name, x=0.08 * depth)
+    _crouch(euler, depth, ("left", "right"), splay=0.15 * depth)
     hang = rng.uniform(1.15, 1.3)
     reach = depth / depth_max if rng.random() < 0.6 else np.zeros_like(depth)
     for s in ("left", "right"):
@@ -284,20 +297,13 @@ def _hop(t: np.ndarray, rng: np.random.Generator) -> _Plan:
     phase = _TWO_PI * rng.uniform(1.1, 1.6) * t + rng.uniform(0.0, _TWO_PI)
     crouch = rng.uniform(0.35, 0.7) * _bump(phase + np.pi / 2.0, 2.0)  # deepest before take-off
     flight = _bump(phase - np.pi / 2.0, 2.0)  # 1 at the top of the hop
-    thigh, shank, pitch = 1.3 * crouch, -0.55 * crouch, 0.35 * crouch  # world angles (rad)
-    _set(euler, "pelvis", x=pitch)
-    for name in ("spine1", "spine2", "spine3"):
-        _set(euler, name, x=0.08 * crouch)
     sides = ("left", "right")
     if rng.random() < 0.5:  # on one foot: the other thigh a little forward, knee bent
         lifted = sides[rng.integers(2)]
         _set_side(euler, lifted, "hip", x=-rng.uniform(0.1, 0.4))
         _set_side(euler, lifted, "knee", x=rng.uniform(0.9, 1.4))
         sides = tuple(s for s in sides if s != lifted)
-    for s in sides:
-        _set_side(euler, s, "hip", x=-thigh - pitch, z=0.05)
-        _set_side(euler, s, "knee", x=thigh - shank)
-        _set_side(euler, s, "ankle", x=shank + 0.35 * flight, z=-0.05)
+    _crouch(euler, crouch, sides, splay=0.05, point=0.35 * flight)
     hang, swing = rng.uniform(1.15, 1.3), rng.uniform(0.4, 0.9)
     arm = swing * (flight - crouch / 0.7)  # forward and up in the air, back in the crouch
     for s in ("left", "right"):
