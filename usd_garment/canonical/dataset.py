@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from usd_garment.atomic import atomic_output
+from usd_garment.motion.sequence import SmplMotion
 
 _ARRAYS = ("canonical", "frame_offsets", "betas", "pose", "trans", "fps", "error", "max_error")
 
@@ -51,6 +52,17 @@ class CanonicalSet:
     def sequence(self, s: int) -> slice:
         """Frames of sequence ``s`` as a slice into the per-frame arrays."""
         return slice(int(self.frame_offsets[s]), int(self.frame_offsets[s + 1]))
+
+    def motion(self, s: int) -> SmplMotion:
+        """The body motion of sequence ``s``: its betas ``(10,)``, pose ``(T_s, 24, 3)`` and
+        trans ``(T_s, 3)`` as float32, at its fps."""
+        frames = self.sequence(s)
+        return SmplMotion(
+            betas=np.asarray(self.betas[s], dtype=np.float32),
+            pose=np.asarray(self.pose[frames], dtype=np.float32),
+            trans=np.asarray(self.trans[frames], dtype=np.float32),
+            fps=float(self.fps[s]),
+        )
 
     def split_sequences(self, split: str) -> list[int]:
         """Indices of the sequences in ``split``."""

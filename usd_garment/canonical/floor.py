@@ -29,7 +29,6 @@ from usd_garment.garment.model import GarmentModel
 from usd_garment.generative.fit import fit_latents
 from usd_garment.methods.learned import predict_latents
 from usd_garment.methods.learned_model import LearnedModel
-from usd_garment.motion.sequence import SmplMotion
 from usd_garment.usd.garment_read import read_garment_layer
 
 #: Frames posed at once (bounds the ``(t, N, channels)`` temporaries of M_G).
@@ -107,13 +106,7 @@ def network_floor(
     for done, s in enumerate(_chosen(data, splits), 1):
         frames = data.sequence(s)
         x = torch.as_tensor(data.canonical[frames]).float()
-        motion = SmplMotion(
-            betas=np.asarray(data.betas[s], dtype=np.float32),
-            pose=np.asarray(data.pose[frames], dtype=np.float32),
-            trans=np.asarray(data.trans[frames], dtype=np.float32),
-            fps=float(data.fps[s]),
-        )
-        z = predict_latents(model, motion)
+        z = predict_latents(model, data.motion(s))
         fit = fit_latents(model.vae, x, init=z)
         with torch.no_grad():
             networks, best = model.vae.decode(z), model.vae.decode(fit)

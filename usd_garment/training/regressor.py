@@ -18,7 +18,6 @@ import torch
 
 from usd_garment.canonical.dataset import CanonicalSet
 from usd_garment.motion.resample import resample_motion
-from usd_garment.motion.sequence import SmplMotion
 from usd_garment.regressor.descriptor import MODEL_FPS, descriptor_size, motion_descriptor
 from usd_garment.regressor.gru import GarmentRegressor
 from usd_garment.regressor.pose_code import PoseCodec
@@ -131,14 +130,7 @@ def prepare_sequence(
     device = torch.device(config.device)
     frames = data.sequence(s)
     fps = float(data.fps[s])
-    betas = np.asarray(data.betas[s], dtype=np.float32)
-    motion = SmplMotion(
-        betas=betas,
-        pose=np.asarray(data.pose[frames], dtype=np.float32),
-        trans=np.asarray(data.trans[frames], dtype=np.float32),
-        fps=fps,
-    )
-    motion = resample_motion(motion, MODEL_FPS)
+    motion = resample_motion(data.motion(s), MODEL_FPS)
     canonical = resample_frames(
         np.asarray(data.canonical[frames], dtype=np.float32), fps, MODEL_FPS
     )
@@ -152,7 +144,7 @@ def prepare_sequence(
     )
     return RegressorSequence(
         gamma=gamma.to(device),
-        betas=torch.as_tensor(betas, device=device),
+        betas=torch.as_tensor(motion.betas, device=device),
         latent=latent,
         canonical=x if keep_canonical else None,
     )
