@@ -165,7 +165,7 @@ def make(
                 seed=seed, substeps=substeps, iterations=iterations, material=fabric,
                 shape_sigma=shape_sigma, open_shoulders=open_shoulders, train_only=train_only,
                 captures=tuple(_capture(text) for text in captures),
-                capture_shapes=capture_shapes, kinds=tuple(k for k in kinds.split(",") if k),
+                capture_shapes=capture_shapes, kinds=tuple(split_list(kinds)),
             )  # fmt: skip
             splits = split_list(split_names)
             manifest = make_dataset(
