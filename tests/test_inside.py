@@ -93,7 +93,7 @@ def test_push_out_is_the_same_frame_by_frame(
     surface = BodySurface(body_model.faces.numpy(), verts.shape[1])
     whole = module.push_out(points, verts, surface)
     first = signed_distance(points, verts, surface, probe_below=module.PUSH_OUT_EPS)
-    monkeypatch.setattr(module, "TREE_FRAMES", 1)
+    monkeypatch.setattr(module, "BLOCK_FRAMES", 1)
     np.testing.assert_array_equal(module.push_out(points, verts, surface, first=first), whole)
     assert (np.abs(whole - points).max(-1) > 0).sum() > 100  # it did move points
     assert not signed_distance(whole, verts, surface, probe_below=1e-3).elsewhere.any()

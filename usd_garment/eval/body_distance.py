@@ -14,7 +14,6 @@ Shapes: T frames, N query points, V body vertices, F body faces. Units: metres.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -143,6 +142,36 @@ def _tree(points: np.ndarray) -> cKDTree:
     return cKDTree(points, leafsize=32, balanced_tree=False, compact_nodes=False)
 
 
+class BodyFrames:
+    """The search structures of each frame of a posed body, built on first use and shared by
+    every query of those frames (the push-out's passes): the k-d tree of the triangles'
+    centroids and libigl's winding-number hierarchy (about 10 MB a frame for the default body).
+
+    Args:
+        body_vertices: ``(T, V, 3)`` posed body vertices (m).
+        surface: the body's topology.
+    """
+
+    def __init__(self, body_vertices: np.ndarray | torch.Tensor, surface: BodySurface) -> None:
+        self.vertices = torch.as_tensor(body_vertices).float()
+        self.faces = surface.faces
+        self._centroids: dict[int, cKDTree] = {}
+        self._winding: dict[int, igl.FastWindingNumberBVH] = {}
+
+    def centroid_tree(self, t: int) -> cKDTree:
+        """The k-d tree of frame ``t``'s triangle centroids (triangle order of the faces)."""
+        if t not in self._centroids:
+            centroids = self.vertices[t][self.faces].mean(dim=1).numpy()  # (F, 3)
+            self._centroids[t] = _tree(centroids)
+        return self._centroids[t]
+
+    def winding(self, t: int) -> igl.FastWindingNumberBVH:
+        """The winding-number hierarchy of frame ``t`` (:func:`winding_tree`)."""
+        if t not in self._winding:
+            self._winding[t] = winding_tree(self.vertices[t].numpy(), self.faces.numpy())
+        return self._winding[t]
+
+
 def _gather(vertices: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
     """``vertices[b, index[b, ...]]`` for ``vertices`` ``(B, V, 3)``: shape ``(*index, 3)``."""
     frame = torch.arange(vertices.shape[0]).reshape(-1, *([1] * (index.dim() - 1)))
@@ -222,19 +251,21 @@ def signed_distance(
     surface: BodySurface,
     nearest: int = NEAREST_FACES,
     probe_below: float = 0.0,
-    trees: Sequence[igl.FastWindingNumberBVH] | None = None,
+    frames: BodyFrames | None = None,
 ) -> BodyDistance:
     """Signed distance of ``points`` ``(T, N, 3)`` to the body ``(T, V, 3)``, frame by frame.
 
     The closest point is searched among the ``nearest`` triangles whose centroids are nearest
     (a k-d tree per frame), in float32; the sign is the winding-number inside test. Where the
     signed distance is below ``probe_below`` (m; 0: the inside points only), the closest point
-    is probed ``FORCED_PROBE`` outside its surface for lying inside the body. ``trees``: the
-    winding-number hierarchy of each frame's body (:func:`winding_tree`), when the caller
-    queries the same frames again; None: built here, one per frame.
+    is probed ``FORCED_PROBE`` outside its surface for lying inside the body. ``frames``: the
+    search structures of ``body_vertices``' frames (:class:`BodyFrames`), when the caller
+    queries the same frames again; None: built here for this query.
     """
     pts = torch.as_tensor(points).float()
-    verts = torch.as_tensor(body_vertices).float()
+    if frames is None:
+        frames = BodyFrames(body_vertices, surface)
+    verts = frames.vertices
     t_frames, n = pts.shape[:2]
     k = min(nearest, surface.faces.shape[0])
     chunk = max(1, PAIRS_PER_CHUNK // max(1, n * k))
@@ -244,10 +275,10 @@ def signed_distance(
     for s in range(0, t_frames, chunk):
         p, v = pts[s : s + chunk], verts[s : s + chunk]
         b = p.shape[0]
-        centroids = v[:, surface.faces].mean(dim=2).numpy()  # (b, F, 3)
         cand = np.stack(
-            [_tree(centroids[i]).query(p[i].numpy(), k=k)[1].reshape(n, k) for i in range(b)]
-        )
+            [frames.centroid_tree(s + i).query(p[i].numpy(), k=k)[1].reshape(n, k)
+             for i in range(b)]
+        )  # fmt: skip
         cand = torch.from_numpy(cand)  # (b, n, k) face indices
         tri = _gather(v, surface.faces[cand])  # (b, n, k, 3, 3)
         q, code = _closest_on_triangles(p[:, :, None], *tri.unbind(-2))
@@ -269,10 +300,9 @@ def signed_distance(
         closest[s : s + b] = q.numpy()
         normal[s : s + b] = pseudo.numpy()
         dist[s : s + b] = (p - q).norm(dim=-1).numpy()
-    faces = surface.faces.numpy()
     closest_inside = np.zeros((t_frames, n), dtype=bool)
     for t in range(t_frames):
-        tree = trees[t] if trees is not None else winding_tree(verts[t].numpy(), faces)
+        tree = frames.winding(t)
         inside = tree_winding_numbers(tree, pts[t].numpy()) > WINDING_INSIDE
         dist[t] = np.where(inside, -dist[t], dist[t])
         probe = np.flatnonzero(dist[t] < probe_below)

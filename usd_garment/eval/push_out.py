@@ -8,19 +8,9 @@ pass halves ε: the vertex ends up between the two."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
-from usd_garment.eval.body_distance import (
-    BodyDistance,
-    BodySurface,
-    signed_distance,
-    winding_tree,
-)
-
-if TYPE_CHECKING:
-    import igl
+from usd_garment.eval.body_distance import BodyDistance, BodyFrames, BodySurface, signed_distance
 
 #: Distance outside the body that pushed vertices are moved to (m); DESIGN.md, 2 mm.
 PUSH_OUT_EPS = 2e-3
@@ -55,42 +45,26 @@ def push_out(
         ``(T, N, 3)`` pushed points, the input's dtype.
     """
     out = np.array(points, dtype=np.float64)
-    faces = surface.faces.numpy()
-    for a in range(0, out.shape[0], TREE_FRAMES):
-        b = min(a + TREE_FRAMES, out.shape[0])
-        trees = _LazyTrees(body_vertices[a:b], faces)
+    for a in range(0, out.shape[0], BLOCK_FRAMES):
+        b = min(a + BLOCK_FRAMES, out.shape[0])
+        frames = BodyFrames(body_vertices[a:b], surface)
         done = first.frames(a, b) if first is not None else None
-        out[a:b] = _push_frames(out[a:b], body_vertices[a:b], surface, eps, passes, done, trees)
+        out[a:b] = _push_frames(out[a:b], frames, surface, eps, passes, done)
     return out.astype(np.asarray(points).dtype)
 
 
-#: Frames whose winding-number hierarchies are held at once (about 5 MB each), built on first
-#: use and shared by every pass over those frames.
-TREE_FRAMES = 16
-
-
-class _LazyTrees:
-    """The winding-number hierarchy of each frame of ``body_vertices`` ``(T, V, 3)``, built
-    when first needed."""
-
-    def __init__(self, body_vertices: np.ndarray, faces: np.ndarray) -> None:
-        self.body_vertices, self.faces = np.asarray(body_vertices), faces
-        self.trees: list[igl.FastWindingNumberBVH] | None = None
-
-    def get(self) -> list[igl.FastWindingNumberBVH]:
-        if self.trees is None:
-            self.trees = [winding_tree(v, self.faces) for v in self.body_vertices]
-        return self.trees
+#: Frames whose search structures (:class:`BodyFrames`, about 10 MB each) are held at once,
+#: built on first use and shared by every pass over those frames.
+BLOCK_FRAMES = 16
 
 
 def _push_frames(
     out: np.ndarray,
-    body_vertices: np.ndarray,
+    frames: BodyFrames,
     surface: BodySurface,
     eps: float,
     passes: int,
     first: BodyDistance | None,
-    trees: _LazyTrees,
 ) -> np.ndarray:
     """The passes of :func:`push_out` on frames ``out`` ``(t, N, 3)`` float64, in place."""
     columns = np.arange(out.shape[1])
@@ -101,8 +75,9 @@ def _push_frames(
         if k == 0 and first is not None:
             query = first
         else:
-            query = signed_distance(out[:, columns], body_vertices, surface, probe_below=step,
-                                    trees=trees.get())  # fmt: skip
+            query = signed_distance(
+                out[:, columns], frames.vertices, surface, probe_below=step, frames=frames
+            )
         near = (query.distance < step) & ~query.closest_inside  # (t, C)
         if not near.any():
             break
