@@ -8,6 +8,7 @@ import json
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
@@ -197,3 +198,24 @@ def test_error_budget_picks_the_fastest_method_that_meets_it(
         tmp_path, body_layer,
     )  # fmt: skip
     assert "no error table" in message
+
+
+def test_dress_workers_push_out_in_processes(tmp_path: Path, body_model: BodyModel) -> None:
+    """``--workers 2`` writes the garment of one process; a method that pushes nothing out
+    refuses it."""
+    from usd_garment.usd.garment_read import read_garment_layer
+
+    body = tmp_path / "body.usda"
+    write_body_layer(body, random_motion(frames=20), body_model)  # two blocks of 16 frames
+    layers = []
+    for workers in (1, 2):
+        out = tmp_path / f"w{workers}.usdc"
+        code, stdout, _ = _run(["dress", body, "-o", out, "--method", "lbs+postprocess",
+                                "--lod", "low", "--workers", workers])  # fmt: skip
+        assert code == 0, stdout
+        layers.append(read_garment_layer(out)[0])
+    np.testing.assert_array_equal(layers[1], layers[0])
+    code, _, stderr = _run(["dress", body, "-o", tmp_path / "no.usdc", "--method", "lbs",
+                            "--workers", "2"])  # fmt: skip
+    assert code == 2 and "Invalid value for --workers" in stderr
+    assert not (tmp_path / "no.usdc").exists()

@@ -97,3 +97,18 @@ def test_push_out_is_the_same_frame_by_frame(
     np.testing.assert_array_equal(module.push_out(points, verts, surface, first=first), whole)
     assert (np.abs(whole - points).max(-1) > 0).sum() > 100  # it did move points
     assert not signed_distance(whole, verts, surface, probe_below=1e-3).elsewhere.any()
+
+
+def test_push_out_in_worker_processes_is_the_same(
+    body_model: BodyModel, arms_down: tuple[np.ndarray, np.ndarray], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``dress --workers``: blocks of frames pushed out by spawned processes give the result of
+    this process to the bit."""
+    from usd_garment.eval import push_out as module
+
+    verts, points = arms_down
+    surface = BodySurface(body_model.faces.numpy(), verts.shape[1])
+    alone = module.push_out(points, verts, surface)
+    monkeypatch.setattr(module, "BLOCK_FRAMES", 1)  # two blocks for two workers
+    with module.PushOutPool(surface, 2) as pool:
+        np.testing.assert_array_equal(module.push_out(points, verts, surface, pool=pool), alone)

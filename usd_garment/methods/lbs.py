@@ -12,7 +12,7 @@ from scipy.spatial import cKDTree
 from usd_garment.body.lbs import blend_shapes, skin
 from usd_garment.body.model import BodyModel
 from usd_garment.eval.body_distance import BodySurface
-from usd_garment.eval.push_out import PUSH_OUT_EPS, PUSH_OUT_PASSES, push_out
+from usd_garment.eval.push_out import PUSH_OUT_EPS, PUSH_OUT_PASSES, pool_for, push_out
 from usd_garment.garment.template import GarmentTemplate
 from usd_garment.methods.base import Progress, predict_chunks
 from usd_garment.motion.sequence import SmplMotion
@@ -33,6 +33,8 @@ class LbsMethod:
     name = "lbs"
     version = "1"
     push_out = False
+    #: Processes that push the garment out (one CPU core each; 1: this process).
+    push_out_workers = 1
     settings: dict[str, float | int | str] = {}  # noqa: RUF012 (read-only)
 
     def predict(
@@ -62,14 +64,15 @@ class LbsMethod:
         surface = BodySurface(body.faces.numpy(), body.num_vertices) if self.push_out else None
         pose = torch.as_tensor(motion.pose, dtype=torch.float32)
         trans = torch.as_tensor(motion.trans, dtype=torch.float32)
-        for s in range(0, motion.num_frames, chunk):
-            e = min(s + chunk, motion.num_frames)
-            with torch.no_grad():
-                posed = body(betas[0], pose[s:e], trans[s:e])
-                points = skin(rest.expand(e - s, -1, -1), weights, posed.transforms).numpy()
-            if surface is not None:
-                points = push_out(points, posed.vertices.numpy(), surface)
-            yield points.astype(np.float32, copy=False)
+        with pool_for(surface, self.push_out_workers) as pool:
+            for s in range(0, motion.num_frames, chunk):
+                e = min(s + chunk, motion.num_frames)
+                with torch.no_grad():
+                    posed = body(betas[0], pose[s:e], trans[s:e])
+                    points = skin(rest.expand(e - s, -1, -1), weights, posed.transforms).numpy()
+                if surface is not None:
+                    points = push_out(points, posed.vertices.numpy(), surface, pool=pool)
+                yield points.astype(np.float32, copy=False)
 
 
 class LbsPushOutMethod(LbsMethod):

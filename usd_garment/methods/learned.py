@@ -23,7 +23,7 @@ import torch
 from usd_garment.body.model import BodyModel
 from usd_garment.canonical.push_out import push_out_canonical
 from usd_garment.eval.body_distance import BodySurface
-from usd_garment.eval.push_out import PUSH_OUT_EPS, PUSH_OUT_PASSES, push_out
+from usd_garment.eval.push_out import PUSH_OUT_EPS, PUSH_OUT_PASSES, pool_for, push_out
 from usd_garment.fields.body_fields import BodyFields, load_body_fields
 from usd_garment.garment.lod import carry_to_lod
 from usd_garment.garment.model import GarmentModel
@@ -127,6 +127,8 @@ class LearnedMethod:
     canonical_push = False
     #: Push vertices inside or within ε of the posed body out (:func:`push_out`).
     push_out = False
+    #: Processes that push the garment out (one CPU core each; 1: this process).
+    push_out_workers = 1
 
     def __init__(
         self,
@@ -248,33 +250,35 @@ class LearnedMethod:
         lap("load")
         z = predict_latents(model, motion)
         lap("regressor")
-        for s in range(0, t_frames, chunk):
-            e = min(s + chunk, t_frames)
-            with torch.no_grad():
-                x = model.vae.decode(z[s:e])
-                lap("decoder")
-                if self.canonical_push:
-                    x = push_out_canonical(x, self._fields.sdf)
-                    lap("canonical")
-                tangent = self._fields.linearized(x.mean(dim=0)) if not self.exact_fields else None
-                lap("fields")
-                art = garment_model.articulation(betas, pose[s:e], trans[s:e])
-                parts = []
-                for a in range(0, e - s, POSE_FRAMES):  # bounds the (t, N, channels) temporaries
-                    b = slice(a, a + POSE_FRAMES)
-                    parts.append(garment_model.pose(x[b], art[b], tangent).vertices)
-                points = torch.cat(parts).numpy()
-                lap("posing")
-            if carried:
-                points = carry_to_lod(points, template.name, model.lod, template.lod)
-                lap("carry")
-            if surface is not None:
+        with pool_for(surface, self.push_out_workers) as pool:
+            for s in range(0, t_frames, chunk):
+                e = min(s + chunk, t_frames)
                 with torch.no_grad():
-                    posed = body(betas, pose[s:e], trans[s:e]).vertices.numpy()
-                points = push_out(points, posed, surface)
-                lap("push_out")
-            yield points
-            clock[0] = time.perf_counter()  # the consumer's time (writing) is not ours
+                    x = model.vae.decode(z[s:e])
+                    lap("decoder")
+                    if self.canonical_push:
+                        x = push_out_canonical(x, self._fields.sdf)
+                        lap("canonical")
+                    tangent = None if self.exact_fields else self._fields.linearized(x.mean(dim=0))
+                    lap("fields")
+                    art = garment_model.articulation(betas, pose[s:e], trans[s:e])
+                    parts = []
+                    # POSE_FRAMES at a time bounds the (t, N, channels) temporaries.
+                    for a in range(0, e - s, POSE_FRAMES):
+                        b = slice(a, a + POSE_FRAMES)
+                        parts.append(garment_model.pose(x[b], art[b], tangent).vertices)
+                    points = torch.cat(parts).numpy()
+                    lap("posing")
+                if carried:
+                    points = carry_to_lod(points, template.name, model.lod, template.lod)
+                    lap("carry")
+                if surface is not None:
+                    with torch.no_grad():
+                        posed = body(betas, pose[s:e], trans[s:e]).vertices.numpy()
+                    points = push_out(points, posed, surface, pool=pool)
+                    lap("push_out")
+                yield points
+                clock[0] = time.perf_counter()  # the consumer's time (writing) is not ours
 
 
 class LearnedPushOutMethod(LearnedMethod):
