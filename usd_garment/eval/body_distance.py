@@ -145,7 +145,7 @@ def _tree(points: np.ndarray) -> cKDTree:
 class BodyFrames:
     """The search structures of each frame of a posed body, built on first use and shared by
     every query of those frames (the push-out's passes): the k-d tree of the triangles'
-    centroids and libigl's winding-number hierarchy (about 10 MB a frame for the default body).
+    centroids and libigl's winding-number hierarchy (a few MB a frame for the default body).
 
     Args:
         body_vertices: ``(T, V, 3)`` posed body vertices (m).
@@ -259,8 +259,8 @@ def signed_distance(
     (a k-d tree per frame), in float32; the sign is the winding-number inside test. Where the
     signed distance is below ``probe_below`` (m; 0: the inside points only), the closest point
     is probed ``FORCED_PROBE`` outside its surface for lying inside the body. ``frames``: the
-    search structures of ``body_vertices``' frames (:class:`BodyFrames`), when the caller
-    queries the same frames again; None: built here for this query.
+    search structures of ``body_vertices``' frames (:class:`BodyFrames`, whose vertices are
+    then used), when the caller queries the same frames again; None: built here for this query.
     """
     pts = torch.as_tensor(points).float()
     if frames is None:

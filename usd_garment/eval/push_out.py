@@ -80,7 +80,6 @@ class PushOutPool:
     """
 
     def __init__(self, surface: BodySurface, workers: int) -> None:
-        self.surface = surface
         self.workers = workers
         self._executor = ProcessPoolExecutor(
             workers,
