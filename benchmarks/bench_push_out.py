@@ -19,8 +19,8 @@ import numpy as np
 import torch
 
 from usd_garment.body.io import load_body_model
-from usd_garment.eval.body_distance import BodySurface
-from usd_garment.eval.push_out import PushOutPool, push_out
+from usd_garment.eval.body_distance import BodyPool, BodySurface
+from usd_garment.eval.push_out import push_out
 from usd_garment.garment.library import load_template
 from usd_garment.methods.learned import LearnedMethod
 from usd_garment.usd.read import read_smpl_motion
@@ -62,7 +62,7 @@ def main() -> None:
     print(f"push-out, this process: {1e3 * serial / count:.1f} ms/frame ({count / serial:.1f} "
           f"frames/s; {moved} vertex-frames moved)")  # fmt: skip
     for workers in args.workers:
-        with PushOutPool(surface, workers) as pool:
+        with BodyPool(workers) as pool:
             seconds = []
             for _ in range(2):  # cold (the workers start), then warm
                 start = time.perf_counter()

@@ -13,9 +13,10 @@ from tqdm import tqdm
 
 from usd_garment.body.io import load_body_model
 from usd_garment.cli.errors import user_errors
-from usd_garment.cli.options import split_list
+from usd_garment.cli.options import measure_workers_option, split_list
 from usd_garment.eval.bench import BenchInput, BenchMethod, chart_table, run_bench, write_report
 from usd_garment.eval.bench_plots import plot_chart, plot_collision_curves
+from usd_garment.eval.body_distance import body_pool
 from usd_garment.eval.stress import LONG_FRAMES, write_stress_inputs
 from usd_garment.garment.template import GARMENT_NAMES, LODS
 from usd_garment.methods import available_methods
@@ -182,6 +183,7 @@ def _plain(value: object) -> object:
     help="With --stress: a BVH capture to add (repeat), imported at 30 fps.",
 )
 @click.option("--garment", type=click.Choice(GARMENT_NAMES), default="tshirt", show_default=True)
+@measure_workers_option
 def bench(
     inputs: tuple[Path, ...],
     output: Path,
@@ -198,6 +200,7 @@ def bench(
     stress_frames: int,
     captures: tuple[Path, ...],
     garment: str,
+    workers: int,
 ) -> None:
     """Dress every INPUT (animated body layers) with every method at every level of detail;
     chart speed against accuracy."""
@@ -236,8 +239,12 @@ def bench(
                 output / "inputs", load_body_model(), long_frames=stress_frames, captures=captures
             )
     runs = sum(len(m.lods) for m in methods) * len(cases)
-    with tqdm(total=runs, desc="bench", unit="run", leave=False, disable=None) as bar:
-        rows = run_bench(cases, methods, output, garment=garment, on_row=lambda _: bar.update())
+    with (
+        tqdm(total=runs, desc="bench", unit="run", leave=False, disable=None) as bar,
+        body_pool(workers) as pool,
+    ):
+        rows = run_bench(cases, methods, output, garment=garment, on_row=lambda _: bar.update(),
+                         pool=pool)  # fmt: skip
     wall = time.perf_counter() - started
     source = {"wall_seconds": wall, "inputs": [c.name for c in cases]}
     write_report(rows, output, source)

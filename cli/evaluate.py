@@ -9,7 +9,13 @@ from pathlib import Path
 import click
 
 from usd_garment.cli.errors import user_errors
-from usd_garment.cli.options import body_model_option, json_option, skeleton_option
+from usd_garment.cli.options import (
+    body_model_option,
+    json_option,
+    measure_workers_option,
+    skeleton_option,
+)
+from usd_garment.eval.body_distance import body_pool
 from usd_garment.eval.evaluate import evaluate_layer
 
 #: Rows of the summary table: key, label, format.
@@ -52,6 +58,7 @@ def _cell(value: float | int | None, fmt: str) -> str:
 @body_model_option
 @skeleton_option
 @click.option("--per-frame", is_flag=True, help="Also print one row per frame.")
+@measure_workers_option
 @json_option("Print summary and per-frame figures as JSON.")
 def evaluate(
     garment_layer: Path,
@@ -61,12 +68,13 @@ def evaluate(
     body_model: Path | None,
     skeleton: str | None,
     per_frame: bool,
+    workers: int,
     as_json: bool,
 ) -> None:
     """Collisions, distance to a reference, jitter and NaNs of GARMENT_LAYER on its body."""
-    with user_errors():
+    with user_errors(), body_pool(workers) as pool:
         metrics, time_codes = evaluate_layer(
-            garment_layer, body_input, reference, garment, body_model, skeleton
+            garment_layer, body_input, reference, garment, body_model, skeleton, pool
         )
     if as_json:
         click.echo(json.dumps({"time_codes": time_codes.tolist(), **metrics.to_json()}, indent=2))

@@ -200,9 +200,9 @@ def test_error_budget_picks_the_fastest_method_that_meets_it(
     assert "no error table" in message
 
 
-def test_dress_workers_push_out_in_processes(tmp_path: Path, body_model: BodyModel) -> None:
-    """``--workers 2`` writes the garment of one process; a method that pushes nothing out
-    refuses it."""
+def test_workers_give_the_results_of_one_process(tmp_path: Path, body_model: BodyModel) -> None:
+    """``dress --workers 2`` writes the garment of one process, ``eval --workers 2`` prints its
+    figures; a method that pushes nothing out refuses the option."""
     from usd_garment.usd.garment_read import read_garment_layer
 
     body = tmp_path / "body.usda"
@@ -215,6 +215,14 @@ def test_dress_workers_push_out_in_processes(tmp_path: Path, body_model: BodyMod
         assert code == 0, stdout
         layers.append(read_garment_layer(out)[0])
     np.testing.assert_array_equal(layers[1], layers[0])
+    reports = []
+    for workers in (1, 2):
+        code, stdout, _ = _run(["eval", tmp_path / "w1.usdc", "--body", body, "--json",
+                                "--workers", workers])  # fmt: skip
+        assert code == 0, stdout
+        reports.append(json.loads(stdout))
+    assert reports[1] == reports[0]
+    assert reports[0]["summary"]["inside_elsewhere_share"] == 0.0
     code, _, stderr = _run(["dress", body, "-o", tmp_path / "no.usdc", "--method", "lbs",
                             "--workers", "2"])  # fmt: skip
     assert code == 2 and "Invalid value for --workers" in stderr

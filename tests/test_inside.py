@@ -10,7 +10,7 @@ import torch
 import trimesh
 
 from usd_garment.body.model import BodyModel
-from usd_garment.eval.body_distance import BodySurface, signed_distance
+from usd_garment.eval.body_distance import BodyPool, BodySurface, signed_distance
 
 
 def exact_winding_number(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -110,5 +110,22 @@ def test_push_out_in_worker_processes_is_the_same(
     surface = BodySurface(body_model.faces.numpy(), verts.shape[1])
     alone = module.push_out(points, verts, surface)
     monkeypatch.setattr(module, "BLOCK_FRAMES", 1)  # two blocks for two workers
-    with module.PushOutPool(surface, 2) as pool:
+    with BodyPool(2) as pool:
         np.testing.assert_array_equal(module.push_out(points, verts, surface, pool=pool), alone)
+
+
+def test_signed_distance_in_worker_processes_is_the_same(
+    body_model: BodyModel, arms_down: tuple[np.ndarray, np.ndarray], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``eval --workers``: blocks of frames queried by spawned processes give the result of this
+    process to the bit."""
+    from usd_garment.eval import body_distance as module
+
+    verts, points = arms_down
+    surface = BodySurface(body_model.faces.numpy(), verts.shape[1])
+    alone = signed_distance(points, verts, surface, probe_below=1e-3)
+    monkeypatch.setattr(module, "POOL_FRAMES", 1)  # two blocks for two workers
+    with BodyPool(2) as pool:
+        pooled = signed_distance(points, verts, surface, probe_below=1e-3, pool=pool)
+    for name in ("distance", "closest", "normal", "closest_inside"):
+        np.testing.assert_array_equal(getattr(pooled, name), getattr(alone, name))

@@ -17,6 +17,7 @@ import numpy as np
 from usd_garment.atomic import atomic_output
 from usd_garment.body.io import load_body_model
 from usd_garment.dress import dress
+from usd_garment.eval.body_distance import BodyPool
 from usd_garment.eval.evaluate import evaluate_layer
 from usd_garment.eval.metrics import GarmentMetrics
 from usd_garment.methods import GarmentMethod, get_method
@@ -115,12 +116,15 @@ def run_bench(
     *,
     garment: str = "tshirt",
     on_row: Callable[[BenchRow], None] | None = None,
+    pool: BodyPool | None = None,
 ) -> list[BenchRow]:
     """Dress every input with every method at each of its levels of detail and evaluate it;
     an input's reference simulation gets a row of its own (:data:`REFERENCE_LABEL`, no speed).
 
     Layers go to ``folder/layers``. A method that raises on an input gets a row with ``error``
     set and the run goes on (the stress suite wants to see failures, not stop at them).
+    ``pool``: worker processes that measure the layers (the methods run, and are timed, in
+    this process).
 
     Raises:
         FileNotFoundError: ``folder`` cannot be created.
@@ -132,7 +136,7 @@ def run_bench(
     for case in inputs:
         length = read_smpl_motion(case.body, body)[0].num_frames if body is not None else 0
         if case.reference is not None:
-            rows.append(_reference_row(case, garment))
+            rows.append(_reference_row(case, garment, pool))
             if on_row is not None:
                 on_row(rows[-1])
         for entry in methods:
@@ -145,7 +149,7 @@ def run_bench(
                         case.body, out, garment=garment, method=entry.instance(), lod=lod,
                         frames=frames,
                     )  # fmt: skip
-                    metrics, _ = evaluate_layer(out, case.body, case.reference, garment)
+                    metrics, _ = evaluate_layer(out, case.body, case.reference, garment, pool=pool)
                 except Exception as exc:  # a failing method is a result here, not the end
                     row.error = _failure(exc)
                 else:
@@ -162,13 +166,13 @@ def run_bench(
 REFERENCE_LABEL = "simulation (reference)"
 
 
-def _reference_row(case: BenchInput, garment: str) -> BenchRow:
+def _reference_row(case: BenchInput, garment: str, pool: BodyPool | None) -> BenchRow:
     """The figures of ``case``'s reference simulation itself (collisions, jitter; no speed:
     it was not run here)."""
     assert case.reference is not None
     row = BenchRow(case.name, REFERENCE_LABEL, "reference", "-")
     try:
-        metrics, codes = evaluate_layer(case.reference, case.body, None, garment)
+        metrics, codes = evaluate_layer(case.reference, case.body, None, garment, pool=pool)
     except Exception as exc:  # an unreadable reference is reported like a failed method
         row.error = _failure(exc)
         return row

@@ -14,8 +14,13 @@ Shapes: T frames, N query points, V body vertices, F body faces. Units: metres.
 
 from __future__ import annotations
 
+import multiprocessing
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import ProcessPoolExecutor
+from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from types import TracebackType
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -30,6 +35,8 @@ NEAREST_FACES = 12
 PAIRS_PER_CHUNK = 1_000_000
 #: A point is inside the body where its generalized winding number exceeds this.
 WINDING_INSIDE = 0.5
+#: Frames a :class:`BodyPool` worker queries at once.
+POOL_FRAMES = 16
 #: How far outside its own surface a closest point is probed to tell whether it lies inside
 #: another part of the body (m): body parts closer than this count as touching.
 FORCED_PROBE = 5e-4
@@ -252,6 +259,7 @@ def signed_distance(
     nearest: int = NEAREST_FACES,
     probe_below: float = 0.0,
     frames: BodyFrames | None = None,
+    pool: BodyPool | None = None,
 ) -> BodyDistance:
     """Signed distance of ``points`` ``(T, N, 3)`` to the body ``(T, V, 3)``, frame by frame.
 
@@ -261,7 +269,19 @@ def signed_distance(
     is probed ``FORCED_PROBE`` outside its surface for lying inside the body. ``frames``: the
     search structures of ``body_vertices``' frames (:class:`BodyFrames`, whose vertices are
     then used), when the caller queries the same frames again; None: built here for this query.
+    ``pool``: worker processes that query blocks of :data:`POOL_FRAMES` frames in parallel
+    (the same result; ``frames`` is then not used).
     """
+    if pool is not None and len(points) > POOL_FRAMES:
+        starts = range(0, len(points), POOL_FRAMES)
+        parts = list(pool.map(
+            _distance_block, [np.asarray(points[a : a + POOL_FRAMES]) for a in starts],
+            [np.asarray(body_vertices[a : a + POOL_FRAMES]) for a in starts],
+            [surface.faces.numpy()] * len(starts), [probe_below] * len(starts),
+        ))  # fmt: skip
+        return BodyDistance(*(np.concatenate(arrays) for arrays in zip(
+            *((p.distance, p.closest, p.normal, p.closest_inside) for p in parts), strict=True
+        )))  # fmt: skip
     pts = torch.as_tensor(points).float()
     if frames is None:
         frames = BodyFrames(body_vertices, surface)
@@ -310,3 +330,78 @@ def signed_distance(
             at = closest[t, probe] + FORCED_PROBE * normal[t, probe]
             closest_inside[t, probe] = tree_winding_numbers(tree, at) > WINDING_INSIDE
     return BodyDistance(dist, closest, normal, closest_inside)
+
+
+class BodyPool:
+    """Worker processes (one CPU core each: one torch thread; started once, "spawn") that run
+    body queries on blocks of frames (``dress --workers``, ``eval --workers``, ``bench
+    --workers``); use as a context manager, or :meth:`close` it.
+
+    Args:
+        workers: processes.
+    """
+
+    def __init__(self, workers: int) -> None:
+        self.workers = workers
+        self._executor = ProcessPoolExecutor(
+            workers, mp_context=multiprocessing.get_context("spawn"), initializer=_start_worker
+        )
+
+    def map(self, function: Callable[..., Any], *jobs: Iterable[Any]) -> Iterator[Any]:
+        """``function(*args)`` for the arguments of each job in the workers (a module-level
+        function; a body topology among its arguments goes through :func:`worker_surface`);
+        results in order."""
+        return self._executor.map(function, *jobs)
+
+    def close(self) -> None:
+        """Stop the workers."""
+        self._executor.shutdown()
+
+    def __enter__(self) -> BodyPool:
+        return self
+
+    def __exit__(
+        self,
+        kind: type[BaseException] | None,
+        error: BaseException | None,
+        trace: TracebackType | None,
+    ) -> None:
+        self.close()
+
+
+def body_pool(workers: int) -> AbstractContextManager[BodyPool | None]:
+    """A :class:`BodyPool` of ``workers`` processes, or None (as a context) when one process
+    does the work (``workers`` ≤ 1)."""
+    return BodyPool(workers) if workers > 1 else nullcontext(None)
+
+
+#: The body topology last used by this worker process (:class:`BodyPool`).
+_WORKER_SURFACE: list[BodySurface] = []
+
+
+def _start_worker() -> None:
+    """One torch thread: one core per worker."""
+    torch.set_num_threads(1)
+
+
+def worker_surface(faces: np.ndarray, num_vertices: int) -> BodySurface:
+    """The topology of the mesh ``faces`` ``(F, 3)`` with ``num_vertices`` vertices, built once
+    per worker process of a :class:`BodyPool` while the jobs keep to one mesh."""
+    if not (
+        _WORKER_SURFACE
+        and _WORKER_SURFACE[0].num_vertices == num_vertices
+        and np.array_equal(_WORKER_SURFACE[0].faces.numpy(), faces)
+    ):
+        _WORKER_SURFACE[:] = [BodySurface(faces, num_vertices)]
+    return _WORKER_SURFACE[0]
+
+
+def _distance_block(
+    points: np.ndarray,
+    body_vertices: np.ndarray,
+    faces: np.ndarray,
+    probe_below: float,
+) -> BodyDistance:
+    """:func:`signed_distance` of one block of frames, in a worker of a :class:`BodyPool`."""
+    surface = worker_surface(faces, body_vertices.shape[1])
+    return signed_distance(points, body_vertices, surface, probe_below=probe_below)

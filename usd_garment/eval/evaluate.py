@@ -10,6 +10,7 @@ import torch
 
 from usd_garment.body.io import load_body_model
 from usd_garment.body.model import BodyModel
+from usd_garment.eval.body_distance import BodyPool
 from usd_garment.eval.metrics import GarmentMetrics, evaluate_garment
 from usd_garment.garment.lod import carry_to_lod, lod_with_vertices
 from usd_garment.garment.template import GARMENT_NAMES
@@ -67,10 +68,12 @@ def evaluate_layer(
     garment: str | None = None,
     body_model: str | Path | None = None,
     skeleton: str | None = None,
+    pool: BodyPool | None = None,
 ) -> tuple[GarmentMetrics, np.ndarray]:
     """Metrics of the garment of ``garment_layer`` on the body of ``body_input``; against a
     ``reference`` layer of another level of detail of the same garment, the reference is
     carried to the garment's level of detail first (:mod:`usd_garment.garment.lod`).
+    ``pool``: worker processes that measure blocks of frames (the same figures).
 
     Returns:
         The metrics and the ``(T,)`` time codes they refer to.
@@ -91,4 +94,5 @@ def evaluate_layer(
         ref = ref_points[_frame_index(ref_info.time_codes, info.time_codes, str(reference))]
     step = float(np.median(np.diff(info.time_codes))) if len(info.time_codes) > 1 else 1.0
     fps = info.time_codes_per_second / step
-    return evaluate_garment(points, vertices, body.faces.numpy(), fps, ref), info.time_codes
+    metrics = evaluate_garment(points, vertices, body.faces.numpy(), fps, ref, pool)
+    return metrics, info.time_codes

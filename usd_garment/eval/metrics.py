@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from usd_garment.eval.body_distance import BodySurface, signed_distance
+from usd_garment.eval.body_distance import BodyPool, BodySurface, signed_distance
 
 #: A vertex is "within" the body's contact band when its signed distance is below this (m).
 CONTACT_BAND = 1e-3
@@ -94,15 +94,17 @@ def evaluate_garment(
     body_faces: np.ndarray,
     fps: float,
     reference: np.ndarray | None = None,
+    pool: BodyPool | None = None,
 ) -> GarmentMetrics:
     """Figures of a garment ``(T, N, 3)`` (m) on the posed body ``(T, V, 3)`` with faces
-    ``(F, 3)``, sampled at ``fps``; ``reference`` ``(T, N, 3)`` (m) is optional."""
+    ``(F, 3)``, sampled at ``fps``; ``reference`` ``(T, N, 3)`` (m) is optional; ``pool``:
+    worker processes that measure blocks of frames (the same figures)."""
     points = np.asarray(points, dtype=np.float64)
     t_frames, n = points.shape[:2]
     finite = np.isfinite(points).all(axis=-1)  # (T, N)
     safe = np.where(finite[..., None], points, 0.0)
     surface = BodySurface(body_faces, body_vertices.shape[1])
-    query = signed_distance(safe, body_vertices, surface)
+    query = signed_distance(safe, body_vertices, surface, pool=pool)
     dist = np.where(finite, query.distance, np.nan)
     count = np.maximum(finite.sum(axis=1), 1)
     inside = dist < 0

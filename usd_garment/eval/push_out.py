@@ -8,16 +8,16 @@ pass halves ε: the vertex ends up between the two."""
 
 from __future__ import annotations
 
-import multiprocessing
-from collections.abc import Iterator
-from concurrent.futures import ProcessPoolExecutor
-from contextlib import AbstractContextManager, nullcontext
-from types import TracebackType
-
 import numpy as np
-import torch
 
-from usd_garment.eval.body_distance import BodyDistance, BodyFrames, BodySurface, signed_distance
+from usd_garment.eval.body_distance import (
+    BodyDistance,
+    BodyFrames,
+    BodyPool,
+    BodySurface,
+    signed_distance,
+    worker_surface,
+)
 
 #: Distance outside the body that pushed vertices are moved to (m); DESIGN.md, 2 mm.
 PUSH_OUT_EPS = 2e-3
@@ -33,7 +33,7 @@ def push_out(
     eps: float = PUSH_OUT_EPS,
     passes: int = PUSH_OUT_PASSES,
     first: BodyDistance | None = None,
-    pool: PushOutPool | None = None,
+    pool: BodyPool | None = None,
 ) -> np.ndarray:
     """Move every point closer than ``eps`` to the body (or inside it) to ``eps`` outside,
     unless its closest body point lies inside another part of the body; pass k re-checks the
@@ -48,8 +48,8 @@ def push_out(
             another body part in a crease, e.g. out of the trunk into the arm).
         first: the query of ``points`` already made with ``probe_below=eps``, for the first
             pass (None: made here).
-        pool: worker processes of the same body topology (:class:`PushOutPool`) that push
-            blocks of frames in parallel; None: this process. The result is the same.
+        pool: worker processes (:class:`BodyPool`) that push blocks of frames in parallel;
+            None: this process. The result is the same.
 
     Returns:
         ``(T, N, 3)`` pushed points, the input's dtype.
@@ -57,9 +57,12 @@ def push_out(
     out = np.array(points, dtype=np.float64)
     blocks = [(a, min(a + BLOCK_FRAMES, len(out))) for a in range(0, len(out), BLOCK_FRAMES)]
     if pool is not None and first is None and len(blocks) > 1:
-        pushed = pool.push_blocks(
-            [out[a:b] for a, b in blocks], [body_vertices[a:b] for a, b in blocks], eps, passes
-        )
+        count = len(blocks)
+        pushed = pool.map(
+            _push_block, [out[a:b] for a, b in blocks],
+            [np.asarray(body_vertices[a:b]) for a, b in blocks], [surface.faces.numpy()] * count,
+            [eps] * count, [passes] * count,
+        )  # fmt: skip
         for (a, b), block in zip(blocks, pushed, strict=True):
             out[a:b] = block
     else:
@@ -70,85 +73,16 @@ def push_out(
     return out.astype(np.asarray(points).dtype)
 
 
-class PushOutPool:
-    """Worker processes (one CPU core each, started once, "spawn") that run :func:`push_out` on
-    blocks of frames of one body topology; use as a context manager, or :meth:`close` it.
-
-    Args:
-        surface: the body's topology, the same for every frame pushed with this pool.
-        workers: processes.
-    """
-
-    def __init__(self, surface: BodySurface, workers: int) -> None:
-        self.workers = workers
-        self._executor = ProcessPoolExecutor(
-            workers,
-            mp_context=multiprocessing.get_context("spawn"),
-            initializer=_start_worker,
-            initargs=(surface.faces.numpy(), surface.num_vertices),
-        )
-
-    def push_blocks(
-        self,
-        points: list[np.ndarray],
-        body_vertices: list[np.ndarray],
-        eps: float,
-        passes: int,
-    ) -> Iterator[np.ndarray]:
-        """:func:`push_out`'s passes on each block of frames, ``points[i]`` ``(t, N, 3)``
-        float64 on ``body_vertices[i]`` ``(t, V, 3)``, in the workers; results in order."""
-        count = len(points)
-        return self._executor.map(
-            _push_block, points, [np.asarray(v) for v in body_vertices], [eps] * count,
-            [passes] * count,
-        )  # fmt: skip
-
-    def close(self) -> None:
-        """Stop the workers."""
-        self._executor.shutdown()
-
-    def __enter__(self) -> PushOutPool:
-        return self
-
-    def __exit__(
-        self,
-        kind: type[BaseException] | None,
-        error: BaseException | None,
-        trace: TracebackType | None,
-    ) -> None:
-        self.close()
-
-
-def pool_for(
-    surface: BodySurface | None, workers: int
-) -> AbstractContextManager[PushOutPool | None]:
-    """A :class:`PushOutPool` of ``workers`` processes for ``surface``, or None (as a context)
-    when there is nothing to push (no surface) or one process does it (``workers`` ≤ 1)."""
-    if surface is None or workers <= 1:
-        return nullcontext(None)
-    return PushOutPool(surface, workers)
-
-
-#: The body topology of this worker process (:class:`PushOutPool`).
-_WORKER_SURFACE: list[BodySurface] = []
-
-
-def _start_worker(faces: np.ndarray, num_vertices: int) -> None:
-    """Build the worker's body topology once; one thread (one core per worker)."""
-    torch.set_num_threads(1)
-    _WORKER_SURFACE.append(BodySurface(faces, num_vertices))
-
-
 def _push_block(
-    points: np.ndarray, body_vertices: np.ndarray, eps: float, passes: int
+    points: np.ndarray, body_vertices: np.ndarray, faces: np.ndarray, eps: float, passes: int
 ) -> np.ndarray:
-    """:func:`push_out`'s passes on one block of frames ``(t, N, 3)`` float64, in a worker."""
-    surface = _WORKER_SURFACE[0]
-    frames = BodyFrames(body_vertices, surface)
-    return _push_frames(points, frames, surface, eps, passes, None)
+    """:func:`push_out`'s passes on one block of frames ``(t, N, 3)`` float64, in a worker of
+    a :class:`BodyPool`."""
+    surface = worker_surface(faces, body_vertices.shape[1])
+    return _push_frames(points, BodyFrames(body_vertices, surface), surface, eps, passes, None)
 
 
-#: Frames whose search structures (:class:`BodyFrames`, about 10 MB each) are held at once,
+#: Frames whose search structures (:class:`BodyFrames`, a few MB each) are held at once,
 #: built on first use and shared by every pass over those frames.
 BLOCK_FRAMES = 16
 

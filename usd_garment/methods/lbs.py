@@ -11,8 +11,8 @@ from scipy.spatial import cKDTree
 
 from usd_garment.body.lbs import blend_shapes, skin
 from usd_garment.body.model import BodyModel
-from usd_garment.eval.body_distance import BodySurface
-from usd_garment.eval.push_out import PUSH_OUT_EPS, PUSH_OUT_PASSES, pool_for, push_out
+from usd_garment.eval.body_distance import BodySurface, body_pool
+from usd_garment.eval.push_out import PUSH_OUT_EPS, PUSH_OUT_PASSES, push_out
 from usd_garment.garment.template import GarmentTemplate
 from usd_garment.methods.base import Progress, predict_chunks
 from usd_garment.motion.sequence import SmplMotion
@@ -64,7 +64,7 @@ class LbsMethod:
         surface = BodySurface(body.faces.numpy(), body.num_vertices) if self.push_out else None
         pose = torch.as_tensor(motion.pose, dtype=torch.float32)
         trans = torch.as_tensor(motion.trans, dtype=torch.float32)
-        with pool_for(surface, self.push_out_workers) as pool:
+        with body_pool(self.push_out_workers if self.push_out else 1) as pool:
             for s in range(0, motion.num_frames, chunk):
                 e = min(s + chunk, motion.num_frames)
                 with torch.no_grad():

@@ -22,8 +22,8 @@ import torch
 
 from usd_garment.body.model import BodyModel
 from usd_garment.canonical.push_out import push_out_canonical
-from usd_garment.eval.body_distance import BodySurface
-from usd_garment.eval.push_out import PUSH_OUT_EPS, PUSH_OUT_PASSES, pool_for, push_out
+from usd_garment.eval.body_distance import BodySurface, body_pool
+from usd_garment.eval.push_out import PUSH_OUT_EPS, PUSH_OUT_PASSES, push_out
 from usd_garment.fields.body_fields import BodyFields, load_body_fields
 from usd_garment.garment.lod import carry_to_lod
 from usd_garment.garment.model import GarmentModel
@@ -250,7 +250,7 @@ class LearnedMethod:
         lap("load")
         z = predict_latents(model, motion)
         lap("regressor")
-        with pool_for(surface, self.push_out_workers) as pool:
+        with body_pool(self.push_out_workers if self.push_out else 1) as pool:
             for s in range(0, t_frames, chunk):
                 e = min(s + chunk, t_frames)
                 with torch.no_grad():
