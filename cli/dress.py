@@ -113,8 +113,8 @@ QUALITY_LODS = {"draft": "low", "final": "high"}
     default=1,
     show_default=True,
     help="Processes that push the garment out of the body (the +postprocess methods, --quality "
-    "final), one CPU core each: the post-process, most of their time, runs about N times "
-    "faster on N free cores (each process takes ~2 s to start).",
+    "final), one CPU core each, ~2 s each to start; the same garment. The push-out is most of "
+    "their time: 1.4x faster with 2 workers on a 2-core machine (docs/judge.md).",
 )
 @json_option()
 def dress(

@@ -42,7 +42,7 @@ measure_workers_option = click.option(
     default=1,
     show_default=True,
     help="Processes that measure the garment against the body, blocks of 16 frames each (one "
-    "CPU core each, ~2 s to start): about N times faster on N free cores, the same figures.",
+    "CPU core each, ~2 s each to start); the same figures.",
 )
 skeleton_option = click.option(
     "--skeleton", default=None, help="Skeleton prim path when the stage has several."

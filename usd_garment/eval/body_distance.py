@@ -335,7 +335,8 @@ def signed_distance(
 class BodyPool:
     """Worker processes (one CPU core each: one torch thread; started once, "spawn") that run
     body queries on blocks of frames (``dress --workers``, ``eval --workers``, ``bench
-    --workers``); use as a context manager, or :meth:`close` it.
+    --workers``); use as a context manager, or :meth:`close` it. A script that makes one needs
+    the usual ``if __name__ == "__main__":`` guard (the workers import the main module).
 
     Args:
         workers: processes.
