@@ -150,33 +150,43 @@ def _tree(points: np.ndarray) -> cKDTree:
 
 
 class BodyFrames:
-    """The search structures of each frame of a posed body, built on first use and shared by
-    every query of those frames (the push-out's passes): the k-d tree of the triangles'
-    centroids and libigl's winding-number hierarchy (a few MB a frame for the default body).
+    """The search structures of each frame of a posed body: the k-d tree of the triangles'
+    centroids and libigl's winding-number hierarchy (several MB a frame for the default body).
+    With ``keep``, each is built on first use and kept for every later query of those frames
+    (the push-out's passes over a block of frames); without, built at each use and dropped (one
+    query of many frames, whose memory must not grow with their number).
 
     Args:
         body_vertices: ``(T, V, 3)`` posed body vertices (m).
         surface: the body's topology.
+        keep: hold the structures once built.
     """
 
-    def __init__(self, body_vertices: np.ndarray | torch.Tensor, surface: BodySurface) -> None:
+    def __init__(
+        self, body_vertices: np.ndarray | torch.Tensor, surface: BodySurface, keep: bool = True
+    ) -> None:
         self.vertices = torch.as_tensor(body_vertices).float()
         self.faces = surface.faces
-        self._centroids: dict[int, cKDTree] = {}
-        self._winding: dict[int, igl.FastWindingNumberBVH] = {}
+        self._centroids: dict[int, cKDTree] | None = {} if keep else None
+        self._winding: dict[int, igl.FastWindingNumberBVH] | None = {} if keep else None
 
     def centroid_tree(self, t: int) -> cKDTree:
         """The k-d tree of frame ``t``'s triangle centroids (triangle order of the faces)."""
-        if t not in self._centroids:
-            centroids = self.vertices[t][self.faces].mean(dim=1).numpy()  # (F, 3)
-            self._centroids[t] = _tree(centroids)
-        return self._centroids[t]
+        if self._centroids is not None and t in self._centroids:
+            return self._centroids[t]
+        tree = _tree(self.vertices[t][self.faces].mean(dim=1).numpy())  # centroids (F, 3)
+        if self._centroids is not None:
+            self._centroids[t] = tree
+        return tree
 
     def winding(self, t: int) -> igl.FastWindingNumberBVH:
         """The winding-number hierarchy of frame ``t`` (:func:`winding_tree`)."""
-        if t not in self._winding:
-            self._winding[t] = winding_tree(self.vertices[t].numpy(), self.faces.numpy())
-        return self._winding[t]
+        if self._winding is not None and t in self._winding:
+            return self._winding[t]
+        tree = winding_tree(self.vertices[t].numpy(), self.faces.numpy())
+        if self._winding is not None:
+            self._winding[t] = tree
+        return tree
 
 
 def _gather(vertices: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
@@ -268,7 +278,7 @@ def signed_distance(
     signed distance is below ``probe_below`` (m; 0: the inside points only), the closest point
     is probed ``FORCED_PROBE`` outside its surface for lying inside the body. ``frames``: the
     search structures of ``body_vertices``' frames (:class:`BodyFrames`, whose vertices are
-    then used), when the caller queries the same frames again; None: built here for this query.
+    then used), when the caller queries the same frames again; None: built here at each use.
     ``pool``: worker processes that query blocks of :data:`POOL_FRAMES` frames in parallel
     (the same result; ``frames`` is then not used).
     """
@@ -283,8 +293,8 @@ def signed_distance(
             *((p.distance, p.closest, p.normal, p.closest_inside) for p in parts), strict=True
         )))  # fmt: skip
     pts = torch.as_tensor(points).float()
-    if frames is None:
-        frames = BodyFrames(body_vertices, surface)
+    if frames is None:  # each frame's structures are used once here: not kept
+        frames = BodyFrames(body_vertices, surface, keep=False)
     verts = frames.vertices
     t_frames, n = pts.shape[:2]
     k = min(nearest, surface.faces.shape[0])
