@@ -16,8 +16,7 @@ import torch
 from usd_garment.body import load_body_model
 from usd_garment.fields.body_fields import load_body_fields
 from usd_garment.garment.model import GarmentModel
-from usd_garment.methods.learned import LearnedMethod, to_frames
-from usd_garment.regressor.descriptor import describe_motion
+from usd_garment.methods.learned import LearnedMethod, predict_latents
 from usd_garment.usd.read import read_smpl_motion
 
 
@@ -36,11 +35,10 @@ def main() -> None:
     pose, trans = torch.as_tensor(motion.pose), torch.as_tensor(motion.trans)
     gaps, seconds = [], {"exact": 0.0, "linearized": 0.0}
     with torch.no_grad():
-        gamma, _ = describe_motion(motion, model.pose_codec)
-        z = to_frames(model.regressor.predict(gamma, betas), motion.fps, motion.num_frames)
+        z = predict_latents(model, motion)
         for s in range(0, motion.num_frames, args.chunk):
             e = min(s + args.chunk, motion.num_frames)
-            x = model.vae.decode(z[s:e])
+            x = model.decode(z[s:e])
             art = garment_model.articulation(betas, pose[s:e], trans[s:e])
             start = time.perf_counter()
             exact = garment_model.pose(x, art).vertices

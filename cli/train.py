@@ -185,3 +185,40 @@ def compare(runs: tuple[Path, ...], output: Path) -> None:
             histories[f"{label} ({run.name})"] = record["history"]["epochs"]
         plot_collisions(histories, output)
     click.echo(f"wrote {output}")
+
+
+@train.command("combine", short_help="Average several trained models into one (an ensemble).")
+@click.argument("models", nargs=-1, required=True, type=click.Path(file_okay=False, path_type=Path))
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    required=True,
+    help="Model directory to write; created, and not one of MODELS.",
+)
+@click.option(
+    "--version",
+    "version",
+    default=None,
+    help="The combined model's version (default: the first model's, with '-ensemble').",
+)
+def combine(models: tuple[Path, ...], out: Path, version: str | None) -> None:  # fmt: skip
+    """One model whose garment is the mean of the canonical garments of MODELS (trained on the
+    same garment and body, e.g. with other seeds): each model's networks run, their decodings
+    are averaged and posed once. Each member keeps its own training command and figures."""
+    with user_errors():
+        from usd_garment.methods.learned_model import (
+            combine_models,
+            load_learned_model,
+            save_learned_model,
+        )
+
+        if any(out.resolve() == path.resolve() for path in models):
+            raise click.BadParameter(f"{out} is one of the models combined", param_hint="--out")
+        if version is None:
+            version = f"{load_learned_model(models[0]).version}-ensemble"
+        command = "usd-garment " + shlex.join(
+            ["train", "combine", *map(str, models), "--out", str(out), "--version", version]
+        )
+        model = combine_models(list(models), version, {"command": command})
+        save_learned_model(out, model)
+    click.echo(f"wrote the model {out}: {len(model.members)} members")

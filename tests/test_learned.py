@@ -82,7 +82,7 @@ def test_train_then_dress(body_model: BodyModel, synthetic_body: BodyModel, tmp_
     assert info["garment"] == "tshirt" and info["vertices"] == 1015 and info["lod"] == "low"
     assert info["body"]["fingerprint"] == body_fingerprint(body_model)
     assert info["command"].startswith("usd-garment train all")
-    assert load_learned_model(model, body_model).vae.num_vertices == 1015
+    assert load_learned_model(model, body_model).members[0].vae.num_vertices == 1015
 
     body = tmp_path / "walk.usda"  # 60 fps, so the networks' 30 fps is resampled both ways
     write_body_layer(body, make_motion("walk", 9, 60.0, seed=5, body=body_model), body_model)

@@ -10,6 +10,7 @@ import pytest
 import torch
 from click.testing import CliRunner
 
+from tests.models import untrained_model
 from usd_garment.body.io import load_body_model
 from usd_garment.canonical.dataset import CanonicalSet, load_canonical_set, save_canonical_set
 from usd_garment.canonical.floor import network_floor, pose_canonical, representation_floor
@@ -25,12 +26,11 @@ from usd_garment.eval.body_distance import BodySurface, signed_distance
 from usd_garment.fields.body_fields import load_body_fields
 from usd_garment.garment.library import load_template
 from usd_garment.garment.model import GarmentModel
-from usd_garment.generative.vae import DecoderConfig, GarmentVAE
 from usd_garment.methods.learned import predict_latents
-from usd_garment.methods.learned_model import LearnedModel, body_fingerprint, save_learned_model
+from usd_garment.methods.learned_model import (
+    save_learned_model,
+)
 from usd_garment.motion.sequence import SmplMotion
-from usd_garment.regressor.gru import GarmentRegressor
-from usd_garment.regressor.pose_code import PoseCodec
 from usd_garment.usd.body_layer import write_body_layer
 from usd_garment.usd.garment_layer import GarmentFrames, write_garment_layer
 from usd_garment.usd.read import read_smpl_motion
@@ -334,7 +334,7 @@ def test_dataset_floor_command_prints_a_table_per_split(tmp_path, body, template
     assert row["split"] == "test" and row["reprojection_mm"] < 0.01
     bad = CliRunner().invoke(main, ["dataset", "floor", str(tmp_path / "set.npz"), "--split", "x"])
     assert bad.exit_code != 0 and "unknown split" in bad.output
-    save_learned_model(tmp_path / "model", _untrained_model(body, template))
+    save_learned_model(tmp_path / "model", untrained_model(body, template))
     args = ["dataset", "floor", str(tmp_path / "set.npz"), "--model", str(tmp_path / "model")]
     result = CliRunner().invoke(main, args)
     assert result.exit_code == 0, result.output
@@ -344,31 +344,14 @@ def test_dataset_floor_command_prints_a_table_per_split(tmp_path, body, template
     assert row["reprojection_mm"] < 0.01 and 0.0 < row["decoder_fit_mm"] <= row["networks_mm"]
 
 
-def _untrained_model(body, template) -> LearnedModel:
-    """Small seeded untrained networks for the low T-shirt, decoding to within a few cm of
-    its rest shape."""
-    with torch.random.fork_rng(devices=[]):
-        torch.manual_seed(0)
-        decoder = DecoderConfig(kind="basis", hidden=[16], basis_size=8)
-        vae = GarmentVAE(len(template.vertices), encoder_hidden=None, decoder=decoder)
-        vae.mean.copy_(torch.as_tensor(template.vertices))
-        vae.std.fill_(0.01)
-        return LearnedModel(
-            vae=vae.eval(), pose_codec=PoseCodec(hidden=16).eval(),
-            regressor=GarmentRegressor(hidden=(8,)).eval(), garment="tshirt", lod="low",
-            vertices=len(template.vertices), version="test", body_name=body.name,
-            body_fingerprint=body_fingerprint(body),
-        )  # fmt: skip
-
-
 def test_network_floor_splits_the_error_into_best_fit_and_prediction(body, template, motion):
     """The decoder's best fit recovers garments that are decodings; the networks' figure is
     the distance of the decoded regressor codes; both are per sequence and split."""
     betas, pose, trans = motion
-    model = _untrained_model(body, template)
+    model = untrained_model(body, template)
     z_true = 0.5 * torch.randn(FRAMES, 25, generator=torch.Generator().manual_seed(1))
     with torch.no_grad():
-        decoded = model.vae.decode(z_true).numpy()
+        decoded = model.decode(z_true).numpy()
     rest = np.repeat(template.vertices[None], FRAMES, axis=0).astype(np.float32)
     data = _floor_set(template, motion, "unread.usdc", decoded, rest)
     exact, other = network_floor(data, model)
@@ -377,7 +360,7 @@ def test_network_floor_splits_the_error_into_best_fit_and_prediction(body, templ
     assert other.decoder_fit_mm <= other.networks_mm
     z = predict_latents(model, SmplMotion(betas=betas, pose=pose, trans=trans, fps=30.0))
     with torch.no_grad():
-        expected = 1e3 * float((model.vae.decode(z) - torch.as_tensor(decoded)).norm(dim=-1).mean())
+        expected = 1e3 * float((model.decode(z) - torch.as_tensor(decoded)).norm(dim=-1).mean())
     assert exact.networks_mm == pytest.approx(expected, rel=1e-5)
     assert network_floor(data, model, splits=["test"]) == [other]
     data.canonical = data.canonical[:, :-1]

@@ -107,9 +107,9 @@ def network_floor(
         frames = data.sequence(s)
         x = torch.as_tensor(data.canonical[frames]).float()
         z = predict_latents(model, data.motion(s))
-        fit = fit_latents(model.vae, x, init=z)
+        fit = fit_latents(model.decode, x, init=z)
         with torch.no_grad():
-            networks, best = model.vae.decode(z), model.vae.decode(fit)
+            networks, best = model.decode(z), model.decode(fit)
         out.append(
             NetworkFloor(
                 source=data.sources[s],

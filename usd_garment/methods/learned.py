@@ -88,12 +88,15 @@ def learned_method(name: str, model: str | Path | None = None) -> LearnedMethod:
 
 @torch.no_grad()
 def predict_latents(model: LearnedModel, motion: SmplMotion) -> torch.Tensor:
-    """The regressor's latent codes ``(T, L)`` for the frames of ``motion``: the motion
-    descriptor γ at the model's 30 fps, the GRU, the codes interpolated back to the motion's
-    frames (:func:`to_frames`)."""
-    gamma, _ = describe_motion(motion, model.pose_codec)
+    """The regressors' latent codes ``(T, ΣL_m)`` for the frames of ``motion``, the members'
+    side by side: each member's motion descriptor γ at the model's 30 fps, its GRU, the codes
+    interpolated back to the motion's frames (:func:`to_frames`)."""
     betas = torch.as_tensor(motion.betas, dtype=torch.float32)
-    return to_frames(model.regressor.predict(gamma, betas), motion.fps, motion.num_frames)
+    codes = []
+    for member in model.members:
+        gamma, _ = describe_motion(motion, member.pose_codec)
+        codes.append(member.regressor.predict(gamma, betas))
+    return to_frames(torch.cat(codes, dim=1), motion.fps, motion.num_frames)
 
 
 def to_frames(values: torch.Tensor, fps: float, count: int) -> torch.Tensor:
@@ -163,6 +166,7 @@ class LearnedMethod:
             out.update(
                 garment=self._model.garment,
                 lod=self._model.lod,
+                members=len(self._model.members),
                 version=self._model.version,
                 body_fingerprint=self._model.body_fingerprint,
             )
@@ -254,7 +258,7 @@ class LearnedMethod:
             for s in range(0, t_frames, chunk):
                 e = min(s + chunk, t_frames)
                 with torch.no_grad():
-                    x = model.vae.decode(z[s:e])
+                    x = model.decode(z[s:e])
                     lap("decoder")
                     if self.canonical_push:
                         x = push_out_canonical(x, self._fields.sdf)

@@ -3,15 +3,20 @@ VAE, pose codec, regressor) in one ``weights.safetensors``, and ``model.json`` w
 architectures, the model's version, the garment template it was trained on and the identity of
 the body model it was trained for (a model is refused on another body).
 
+A model holds one or more *members*, each a full set of those networks trained on its own (other
+seeds, other sizes): the model's garment is the mean of the members' canonical garments, posed
+once (an ensemble; :func:`combine_models` makes one from trained models).
+
 ``model.json`` also carries what a person needs to trust it: the command and configuration that
-trained it, the training wall time and machine, and its held-out figures.
+trained it (each member's, for an ensemble), the training wall time and machine, and its
+held-out figures.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -26,8 +31,14 @@ from usd_garment.generative.vae import GarmentVAE
 from usd_garment.regressor.gru import GarmentRegressor
 from usd_garment.regressor.pose_code import PoseCodec
 
-#: Version of the directory layout.
-MODEL_FORMAT = 1
+#: Version of the directory layout: 2 has a list of members; 1 (one member, the networks'
+#: architectures under "architecture" and their weights unprefixed) is still read.
+MODEL_FORMAT = 2
+READ_FORMATS = (1, 2)
+#: The keys of ``model.json`` that describe the layout rather than the model's history.
+_LAYOUT_KEYS = frozenset(
+    ("format", "garment", "lod", "vertices", "version", "body", "architecture", "members")
+)
 CONFIG_NAME = "model.json"
 WEIGHTS_NAME = "weights.safetensors"
 #: The networks of a model and their classes.
@@ -52,13 +63,33 @@ def body_fingerprint(body: BodyModel) -> str:
 
 
 @dataclass
-class LearnedModel:
-    """A trained garment model: its networks and ``model.json``'s metadata.
+class Member:
+    """One trained set of the learned method's networks.
 
     Attributes:
         vae: the garment VAE (its decoder is used at run time, its encoder for training).
         pose_codec: the 10-d pose code.
         regressor: the GRU from motion descriptor and betas to latent codes.
+        info: what ``model.json`` says of this member alone (in an ensemble: the command,
+            configuration and figures of the model it came from); empty for a model of one.
+    """
+
+    vae: GarmentVAE
+    pose_codec: PoseCodec
+    regressor: GarmentRegressor
+    info: dict[str, Any] = field(default_factory=dict)
+
+    def parts(self) -> dict[str, torch.nn.Module]:
+        return {name: getattr(self, name) for name in PARTS}
+
+
+@dataclass
+class LearnedModel:
+    """A trained garment model: its networks (one member, or several averaged) and
+    ``model.json``'s metadata.
+
+    Attributes:
+        members: the trained networks; the model's canonical garment is their decodings' mean.
         garment, lod: the template it was trained on; vertices: its N.
         version: the model's version, written to garment layers as ``garment:modelVersion``.
         body_name, body_fingerprint: the body model it was trained for.
@@ -66,9 +97,7 @@ class LearnedModel:
             held-out figures).
     """
 
-    vae: GarmentVAE
-    pose_codec: PoseCodec
-    regressor: GarmentRegressor
+    members: list[Member]
     garment: str
     lod: str
     vertices: int
@@ -77,8 +106,20 @@ class LearnedModel:
     body_fingerprint: str
     info: dict[str, Any] = field(default_factory=dict)
 
-    def parts(self) -> dict[str, torch.nn.Module]:
-        return {name: getattr(self, name) for name in PARTS}
+    @property
+    def latent_sizes(self) -> list[int]:
+        """Each member's latent size L_m; the model's codes ``(T, ΣL_m)`` are theirs side by
+        side."""
+        return [member.vae.latent_size for member in self.members]
+
+    def decode(self, z: torch.Tensor) -> torch.Tensor:
+        """Canonical garments ``(T, N, 3)`` (m) of the codes ``z`` ``(T, ΣL_m)``: each member
+        decodes its own codes, and the decodings are averaged."""
+        codes = z.split(self.latent_sizes, dim=1)
+        total = self.members[0].vae.decode(codes[0])
+        for member, code in zip(self.members[1:], codes[1:], strict=True):
+            total = total + member.vae.decode(code)
+        return total / len(self.members)
 
     def check_body(self, body: BodyModel) -> None:
         """Raise :class:`ModelError` unless ``body`` is the body the model was trained for."""
@@ -102,15 +143,21 @@ def save_learned_model(
     path = Path(path)
     path.mkdir(parents=True, exist_ok=True)
     tensors = {}
-    for name, part in model.parts().items():
-        parameters = {key for key, _ in part.named_parameters()}
-        for key, value in part.state_dict().items():
-            value = value.detach().cpu()
-            if key in parameters and value.is_floating_point():
-                value = value.to(weights_dtype)
-            tensors[f"{name}.{key}"] = value.contiguous()
+    for index, member in enumerate(model.members):
+        for name, part in member.parts().items():
+            parameters = {key for key, _ in part.named_parameters()}
+            for key, value in part.state_dict().items():
+                value = value.detach().cpu()
+                if key in parameters and value.is_floating_point():
+                    value = value.to(weights_dtype)
+                tensors[f"{index}.{name}.{key}"] = value.contiguous()
     with atomic_output(path / WEIGHTS_NAME) as tmp:
         save_file(tensors, str(tmp))
+    members = [
+        {"architecture": {name: part.config() for name, part in member.parts().items()}}
+        | member.info
+        for member in model.members
+    ]
     config = {
         "format": MODEL_FORMAT,
         "garment": model.garment,
@@ -118,7 +165,7 @@ def save_learned_model(
         "vertices": model.vertices,
         "version": model.version,
         "body": {"name": model.body_name, "fingerprint": model.body_fingerprint},
-        "architecture": {name: part.config() for name, part in model.parts().items()},
+        "members": members,
         **model.info,
     }
     with atomic_output(path / CONFIG_NAME) as tmp:
@@ -139,32 +186,92 @@ def load_learned_model(path: str | Path, body: BodyModel | None = None) -> Learn
         tensors = load_file(str(path / WEIGHTS_NAME))
     except (OSError, json.JSONDecodeError, SafetensorError) as exc:
         raise ModelError(f"{path}: unreadable model ({exc})") from None
-    if not isinstance(config, dict) or config.get("format") != MODEL_FORMAT:
-        raise ModelError(f"{path}: not a model of format {MODEL_FORMAT}")
-    parts = {}
+    if not isinstance(config, dict) or config.get("format") not in READ_FORMATS:
+        raise ModelError(f"{path}: not a model of format {' or '.join(map(str, READ_FORMATS))}")
     try:
-        for name, cls in PARTS.items():
-            part = cls.from_config(config["architecture"][name])
-            prefix = f"{name}."
-            state = {
-                k[len(prefix) :]: v.float() if v.is_floating_point() else v
-                for k, v in tensors.items()
-                if k.startswith(prefix)
-            }
-            part.load_state_dict(state)
-            parts[name] = part.eval()
+        if config["format"] == 1:
+            entries, prefixes = [{"architecture": config["architecture"]}], [""]
+        else:
+            entries = config["members"]
+            prefixes = [f"{index}." for index in range(len(entries))]
+        members = [
+            _load_member(entry, tensors, prefix)
+            for entry, prefix in zip(entries, prefixes, strict=True)
+        ]
         meta = {k: config[k] for k in ("garment", "lod", "vertices", "version")}
         body_name, fingerprint = config["body"]["name"], config["body"]["fingerprint"]
     except (KeyError, TypeError, RuntimeError) as exc:
         raise ModelError(f"{path}: model files do not match ({exc})") from None
-    info = {
-        k: v
-        for k, v in config.items()
-        if k not in ("format", "garment", "lod", "vertices", "version", "body", "architecture")
-    }
+    if not members:
+        raise ModelError(f"{path}: a model with no members")
+    info = {k: v for k, v in config.items() if k not in _LAYOUT_KEYS}
     model = LearnedModel(
-        **parts, **meta, body_name=body_name, body_fingerprint=fingerprint, info=info
+        members, **meta, body_name=body_name, body_fingerprint=fingerprint, info=info
     )
     if body is not None:
         model.check_body(body)
     return model
+
+
+def _load_member(entry: dict[str, Any], tensors: dict[str, torch.Tensor], prefix: str) -> Member:
+    """The member that ``model.json``'s ``entry`` describes, its weights those of ``tensors``
+    under ``prefix`` (cast to float32)."""
+    parts = {}
+    for name, cls in PARTS.items():
+        part = cls.from_config(entry["architecture"][name])
+        head = f"{prefix}{name}."
+        state = {
+            k[len(head) :]: v.float() if v.is_floating_point() else v
+            for k, v in tensors.items()
+            if k.startswith(head)
+        }
+        part.load_state_dict(state)
+        parts[name] = part.eval()
+    info = {k: v for k, v in entry.items() if k != "architecture"}
+    return Member(**parts, info=info)  # type: ignore[arg-type]
+
+
+def combine_models(
+    paths: list[str | Path], version: str, info: dict[str, Any] | None = None
+) -> LearnedModel:
+    """One model whose members are those of the model directories ``paths`` (an ensemble: its
+    garment is the mean of theirs). Each member keeps what its model's ``model.json`` said of
+    it (command, training, figures) and where it came from.
+
+    Args:
+        version: the combined model's version.
+        info: ``model.json`` entries of the combined model (the command that combined it).
+
+    Raises:
+        ModelError: fewer than two models, an unreadable one, or models of another garment,
+            level of detail or body than the first.
+    """
+    if len(paths) < 2:
+        raise ModelError("combining needs at least two models")
+    models = [load_learned_model(path) for path in paths]
+    first = models[0]
+    members = []
+    for path, model in zip(paths, models, strict=True):
+        if (model.garment, model.lod, model.vertices) != (first.garment, first.lod, first.vertices):
+            raise ModelError(
+                f"{path}: a model of the {model.lod} {model.garment} ({model.vertices} vertices), "
+                f"not the {first.lod} {first.garment} ({first.vertices}) of {paths[0]}"
+            )
+        if model.body_fingerprint != first.body_fingerprint:
+            raise ModelError(
+                f"{path}: trained for the body '{model.body_name}' ({model.body_fingerprint}), "
+                f"not '{first.body_name}' ({first.body_fingerprint}) as {paths[0]}"
+            )
+        for member in model.members:
+            source = member.info or {**model.info, "version": model.version}
+            members.append(replace(member, info={"source": str(path), **source}))
+    return LearnedModel(
+        members,
+        garment=first.garment,
+        lod=first.lod,
+        vertices=first.vertices,
+        version=version,
+        body_name=first.body_name,
+        body_fingerprint=first.body_fingerprint,
+        info=info or {},
+    )

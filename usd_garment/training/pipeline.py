@@ -30,6 +30,7 @@ from usd_garment.generative.vae import GarmentVAE
 from usd_garment.methods.learned_model import (
     PARTS,
     LearnedModel,
+    Member,
     body_fingerprint,
     save_learned_model,
 )
@@ -244,9 +245,8 @@ def assemble_model(
     assert isinstance(regressor, GarmentRegressor)
     meta = data.metadata
     model = LearnedModel(
-        vae=vae.decoder_only(),  # the encoder is for training: its weights stay in checkpoints/
-        pose_codec=codec,
-        regressor=regressor,
+        # The encoder is for training: its weights stay in checkpoints/.
+        [Member(vae=vae.decoder_only(), pose_codec=codec, regressor=regressor)],
         garment=str(meta.get("garment", "tshirt")),
         lod=str(meta.get("lod", "high")),
         vertices=int(data.template.shape[0]),

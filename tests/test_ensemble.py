@@ -1,0 +1,130 @@
+"""A model of several members (an ensemble): ``train combine`` writes one, its garment is the
+mean of its members' canonical garments, ``dress`` uses it like any model, mismatched models are
+refused with nothing written, and a model directory of the first layout (one member) still
+loads."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from click.testing import CliRunner
+from pxr import Usd
+from safetensors.torch import load_file, save_file
+
+from tests.models import untrained_model
+from usd_garment.body.io import load_body_model
+from usd_garment.body.model import BodyModel
+from usd_garment.cli.main import main
+from usd_garment.garment.library import load_template
+from usd_garment.garment.template import GarmentTemplate
+from usd_garment.methods.learned import predict_latents
+from usd_garment.methods.learned_model import load_learned_model, save_learned_model
+from usd_garment.motion.procedural import make_motion
+from usd_garment.usd.body_layer import write_body_layer
+from usd_garment.usd.garment_read import read_garment_layer
+
+
+@pytest.fixture(scope="module")
+def body() -> BodyModel:
+    return load_body_model()
+
+
+@pytest.fixture(scope="module")
+def template() -> GarmentTemplate:
+    return load_template("tshirt", "low")
+
+
+def _run(args: list[object]) -> tuple[int, str]:
+    result = CliRunner().invoke(main, [str(a) for a in args])
+    assert not isinstance(result.exception, AssertionError)
+    return result.exit_code, result.output
+
+
+def _members(tmp_path: Path, body: BodyModel, template: GarmentTemplate) -> list[Path]:
+    """Two saved single-member models of ``template`` drawn with seeds 0 and 1."""
+    paths = [tmp_path / f"seed{seed}" for seed in (0, 1)]
+    for seed, path in enumerate(paths):
+        save_learned_model(path, untrained_model(body, template, seed))
+    return paths
+
+
+def test_combined_model_is_the_mean_of_its_members(tmp_path, body, template):
+    first, second = _members(tmp_path, body, template)
+    out = tmp_path / "ensemble"
+    code, output = _run(["train", "combine", first, second, "--out", out])
+    assert code == 0 and "2 members" in output, output
+    ensemble = load_learned_model(out, body)
+    a, b = load_learned_model(first), load_learned_model(second)
+    assert ensemble.version == "test-ensemble" and ensemble.latent_sizes == [25, 25]
+    info = json.loads((out / "model.json").read_text())
+    assert info["command"].startswith("usd-garment train combine")
+    assert [member["source"] for member in info["members"]] == [str(first), str(second)]
+
+    motion = make_motion("walk", 12, 60.0, seed=3, body=body)
+    z = predict_latents(ensemble, motion)
+    za, zb = predict_latents(a, motion), predict_latents(b, motion)
+    assert z.shape == (12, 50) and torch.equal(z, torch.cat([za, zb], dim=1))
+    with torch.no_grad():
+        mean = (a.decode(za) + b.decode(zb)) / 2
+        torch.testing.assert_close(ensemble.decode(z), mean)
+        assert (a.decode(za) - b.decode(zb)).abs().max() > 1e-3  # the members differ
+
+    code, output = _run(["train", "combine", out, first, "--out", tmp_path / "three"])
+    assert code == 0 and "3 members" in output, output
+    sources = [m.info["source"] for m in load_learned_model(tmp_path / "three").members]
+    assert sources == [str(first), str(second), str(first)]
+
+    layer = tmp_path / "walk.usda"
+    write_body_layer(layer, motion, body)
+    garment = tmp_path / "walk_tshirt.usdc"
+    code, output = _run(["dress", layer, "-o", garment, "--model", out, "--lod", "low"])
+    assert code == 0, output
+    points, _, frames = read_garment_layer(garment)
+    assert points.shape == (12, len(template.vertices), 3) and np.isfinite(points).all()
+    stage = Usd.Stage.Open(str(garment))
+    version = stage.GetPrimAtPath(frames.mesh).GetAttribute("garment:modelVersion")
+    assert version.Get() == "test-ensemble"
+
+
+def test_combine_refuses_mismatched_models(tmp_path, body, template, synthetic_body):
+    first, second = _members(tmp_path, body, template)
+    medium = tmp_path / "medium"
+    save_learned_model(medium, untrained_model(body, load_template("tshirt", "medium")))
+    other_body = tmp_path / "other_body"
+    save_learned_model(other_body, untrained_model(synthetic_body, template))
+    out = tmp_path / "out"
+    for models, message in (
+        ([first], "at least two"),
+        ([first, medium], "not the low tshirt"),
+        ([first, other_body], "trained for the body"),
+        ([first, tmp_path], "not a model directory"),
+    ):
+        code, output = _run(["train", "combine", *models, "--out", out])
+        assert code == 1 and message in output, output
+    code, output = _run(["train", "combine", first, second, "--out", second])
+    assert code == 2 and "one of the models" in output
+    assert not out.exists()
+    assert load_learned_model(second).version == "test"
+
+
+def test_a_model_of_the_first_layout_still_loads(tmp_path, body, template):
+    """Format 1: one member, its architectures under "architecture", its weights unprefixed."""
+    (path,) = _members(tmp_path, body, template)[:1]
+    config = json.loads((path / "model.json").read_text())
+    (member,) = config.pop("members")
+    config |= {"format": 1, "architecture": member["architecture"]}
+    (path / "model.json").write_text(json.dumps(config))
+    tensors = load_file(str(path / "weights.safetensors"))
+    save_file(
+        {k.removeprefix("0."): v for k, v in tensors.items()}, str(path / "weights.safetensors")
+    )
+    old = load_learned_model(path, body)
+    new = untrained_model(body, template, 0)
+    z = torch.randn(4, 25, generator=torch.Generator().manual_seed(0))
+    with torch.no_grad():  # the weights were stored in float16
+        torch.testing.assert_close(old.decode(z), new.decode(z), atol=2e-4, rtol=0)
+    assert len(old.members) == 1 and old.members[0].info == {}
