@@ -6,8 +6,11 @@ canonical push-out, fields, posing) and once through the CLI (with interpreter s
 ``learned+postprocess`` (``dress --quality final``), ``lbs+postprocess`` and the physics
 simulation on slices of the same animation; the ratios between them.
 
+``--model LABEL=DIR`` (repeatable) also dresses the walk in-process with the learned method and
+that model directory, e.g. to weigh an ensemble against the shipped model in the same run.
+
 Run: ``python benchmarks/bench_dress.py [--frames 1000] [--postprocess-frames 100]
-[--simulation-frames 30]``
+[--simulation-frames 30] [--model LABEL=DIR ...]``
 """
 
 from __future__ import annotations
@@ -68,6 +71,7 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=1000)
     parser.add_argument("--postprocess-frames", type=int, default=100)
     parser.add_argument("--simulation-frames", type=int, default=30)
+    parser.add_argument("--model", action="append", default=[], metavar="LABEL=DIR")
     args = parser.parse_args()
     print(f"torch {torch.__version__}, {torch.get_num_threads()} threads")
     with tempfile.TemporaryDirectory() as tmp:
@@ -87,6 +91,12 @@ def main() -> None:
             report(f"{method} (in-process)", runs[method])
             if isinstance(instance, LearnedMethod):
                 per_frame(instance.seconds, runs[method])
+        for text in args.model:
+            label, _, path = text.partition("=")
+            instance = LearnedMethod(path)
+            runs[label] = dress(body_usd, folder / "model.usdc", method=instance).to_json()
+            report(f"{label}: learned with {path} (in-process)", runs[label])
+            per_frame(instance.seconds, runs[label])
         start = time.perf_counter()
         cli = subprocess.run(
             [str(Path(sys.executable).with_name("usd-garment")), "dress", str(body_usd),
@@ -109,7 +119,7 @@ def main() -> None:
                                  frames=(0, n)).to_json()  # fmt: skip
             report(f"{method} (in-process, first {n} frames)", runs[method])
         fps = {m: r["frames"] / sum(r["seconds"].values()) for m, r in runs.items()}
-        for method in slices:
+        for method in [text.partition("=")[0] for text in args.model] + list(slices):
             print(f"ratio: {default} is {fps[default] / fps[method]:.1f}x faster end to end than "
                   f"{method}")  # fmt: skip
 
