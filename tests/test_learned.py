@@ -174,11 +174,15 @@ def test_shipped_model_is_the_default(
         pytest.skip("needs the embedded default body and its fields")
     folder = shipped_model(garment, "high")
     assert folder == SHIPPED_MODELS / garment and default_method(garment, "high") == "learned"
-    assert sum(p.stat().st_size for p in folder.iterdir()) <= 12 * 2**20
-    info = json.loads((folder / "model.json").read_text())
-    assert info["command"].startswith("usd-garment train all") and info["ablation"] == "none"
-    assert set(info["training"]["data"]["frames"]) == {"train", "validation", "test"}
-    assert load_learned_model(folder, body_model).vertices == vertices
+    assert sum(p.stat().st_size for p in folder.rglob("*") if p.is_file()) <= 12 * 2**20
+    model = load_learned_model(folder, body_model)
+    assert model.vertices == vertices
+    # One member trained by 'train all', or an ensemble of such members ('train combine').
+    trained = [member.info for member in model.members if member.info] or [model.info]
+    assert len(trained) == len(model.members)
+    for info in trained:
+        assert info["command"].startswith("usd-garment train all") and info["ablation"] == "none"
+        assert set(info["training"]["data"]["frames"]) == {"train", "validation", "test"}
     body = tmp_path / "walk.usda"
     write_body_layer(body, make_motion("walk", 12, 30.0, seed=21, body=body_model), body_model)
     out = tmp_path / f"walk_{garment}.usdc"
@@ -187,6 +191,24 @@ def test_shipped_model_is_the_default(
     points, _, layer = read_garment_layer(out)
     assert layer.method == "learned" and points.shape == (12, vertices, 3)
     assert np.isfinite(points).all()
+
+
+def test_the_shipped_members_were_trained_with_the_committed_settings() -> None:
+    """Each member of the shipped T-shirt ensemble records the settings of its
+    ``examples/train/tshirt_memberN.json`` (seed, GRU width, VAE epochs; defaults elsewhere)."""
+    from usd_garment.methods.learned import shipped_model
+    from usd_garment.training.pipeline import TrainSettings
+
+    folder = shipped_model("tshirt")
+    assert folder is not None
+    configs = sorted((Path(__file__).parent.parent / "examples" / "train").glob("tshirt_member*"))
+    members = load_learned_model(folder).members
+    assert len(configs) == len(members) == 3
+    for member, path in zip(members, configs, strict=True):
+        settings = TrainSettings.from_dict(json.loads(path.read_text()))
+        settings.set_device("cpu")
+        recorded = member.info["training"]["settings"]
+        assert recorded == json.loads(json.dumps(settings.to_dict())), path.name
 
 
 def test_final_quality_pushes_the_learned_garment_out(body_model: BodyModel,
