@@ -91,8 +91,8 @@ def main() -> None:
             report(f"{method} (in-process)", runs[method])
             if isinstance(instance, LearnedMethod):
                 per_frame(instance.seconds, runs[method])
-        for text in args.model:
-            label, _, path = text.partition("=")
+        models = [text.partition("=")[::2] for text in args.model]  # (label, directory)
+        for label, path in models:
             instance = LearnedMethod(path)
             runs[label] = dress(body_usd, folder / "model.usdc", method=instance).to_json()
             report(f"{label}: learned with {path} (in-process)", runs[label])
@@ -119,7 +119,7 @@ def main() -> None:
                                  frames=(0, n)).to_json()  # fmt: skip
             report(f"{method} (in-process, first {n} frames)", runs[method])
         fps = {m: r["frames"] / sum(r["seconds"].values()) for m, r in runs.items()}
-        for method in [text.partition("=")[0] for text in args.model] + list(slices):
+        for method in [label for label, _ in models] + list(slices):
             print(f"ratio: {default} is {fps[default] / fps[method]:.1f}x faster end to end than "
                   f"{method}")  # fmt: skip
 

@@ -206,19 +206,13 @@ def combine(models: tuple[Path, ...], out: Path, version: str | None) -> None:  
     same garment and body, e.g. with other seeds): each model's networks run, their decodings
     are averaged and posed once. Each member keeps its own training command and figures."""
     with user_errors():
-        from usd_garment.methods.learned_model import (
-            combine_models,
-            load_learned_model,
-            save_learned_model,
-        )
+        from usd_garment.methods.learned_model import combine_models, save_learned_model
 
         if any(out.resolve() == path.resolve() for path in models):
             raise click.BadParameter(f"{out} is one of the models combined", param_hint="--out")
-        if version is None:
-            version = f"{load_learned_model(models[0]).version}-ensemble"
-        command = "usd-garment " + shlex.join(
-            ["train", "combine", *map(str, models), "--out", str(out), "--version", version]
+        model = combine_models(list(models), version)
+        model.info["command"] = "usd-garment " + shlex.join(
+            ["train", "combine", *map(str, models), "--out", str(out), "--version", model.version]
         )
-        model = combine_models(list(models), version, {"command": command})
         save_learned_model(out, model)
     click.echo(f"wrote the model {out}: {len(model.members)} members")

@@ -89,12 +89,12 @@ def learned_method(name: str, model: str | Path | None = None) -> LearnedMethod:
 @torch.no_grad()
 def predict_latents(model: LearnedModel, motion: SmplMotion) -> torch.Tensor:
     """The regressors' latent codes ``(T, ΣL_m)`` for the frames of ``motion``, the members'
-    side by side: each member's motion descriptor γ at the model's 30 fps, its GRU, the codes
-    interpolated back to the motion's frames (:func:`to_frames`)."""
+    side by side: each member's motion descriptor γ at the model's 30 fps (the motion resampled
+    once), its GRU, the codes interpolated back to the motion's frames (:func:`to_frames`)."""
     betas = torch.as_tensor(motion.betas, dtype=torch.float32)
-    codes = []
+    codes, resampled = [], motion
     for member in model.members:
-        gamma, _ = describe_motion(motion, member.pose_codec)
+        gamma, resampled = describe_motion(resampled, member.pose_codec)
         codes.append(member.regressor.predict(gamma, betas))
     return to_frames(torch.cat(codes, dim=1), motion.fps, motion.num_frames)
 

@@ -231,16 +231,14 @@ def _load_member(entry: dict[str, Any], tensors: dict[str, torch.Tensor], prefix
     return Member(**parts, info=info)  # type: ignore[arg-type]
 
 
-def combine_models(
-    paths: list[str | Path], version: str, info: dict[str, Any] | None = None
-) -> LearnedModel:
+def combine_models(paths: list[str | Path], version: str | None = None) -> LearnedModel:
     """One model whose members are those of the model directories ``paths`` (an ensemble: its
     garment is the mean of theirs). Each member keeps what its model's ``model.json`` said of
-    it (command, training, figures) and where it came from.
+    it (command, training, figures) and where it came from; the combined model's own ``info``
+    starts empty (the caller records how it was combined).
 
     Args:
-        version: the combined model's version.
-        info: ``model.json`` entries of the combined model (the command that combined it).
+        version: the combined model's version (None: the first model's, with ``-ensemble``).
 
     Raises:
         ModelError: fewer than two models, an unreadable one, or models of another garment,
@@ -270,8 +268,7 @@ def combine_models(
         garment=first.garment,
         lod=first.lod,
         vertices=first.vertices,
-        version=version,
+        version=version if version is not None else f"{first.version}-ensemble",
         body_name=first.body_name,
         body_fingerprint=first.body_fingerprint,
-        info=info or {},
     )
