@@ -79,9 +79,7 @@ class GarmentModel(torch.nn.Module):
             trans: ``(B, 3)`` root translation (m), or None for zero.
         """
         b = pose.shape[0]
-        if betas.dim() == 1:
-            betas = betas.expand(b, -1)
-        _, rest_joints = self.body.shaped(betas)
+        betas, _, rest_joints = self.body.shaped_frames(betas, b)
         rot_mats = batch_rodrigues(pose.reshape(b, NUM_JOINTS, 3))
         _, transforms = batch_rigid_transform(rot_mats, rest_joints, self.body.parents)
         if trans is not None:
