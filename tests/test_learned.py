@@ -15,8 +15,9 @@ from click.testing import CliRunner
 from usd_garment.body.model import BodyModel
 from usd_garment.canonical.dataset import CanonicalSet, save_canonical_set
 from usd_garment.cli.main import main
+from usd_garment.fields.body_fields import load_body_fields
 from usd_garment.garment.library import load_template
-from usd_garment.methods.learned import to_frames
+from usd_garment.methods.learned import _tangent, to_frames
 from usd_garment.methods.learned_model import ModelError, body_fingerprint, load_learned_model
 from usd_garment.motion.procedural import make_motion
 from usd_garment.usd.body_layer import write_body_layer
@@ -162,6 +163,21 @@ def test_latents_return_to_the_input_frames() -> None:
     at_15 = to_frames(values, 15.0, 2)
     np.testing.assert_allclose(at_15[:, 0].numpy(), [0, 2])
     np.testing.assert_allclose(to_frames(values[:1], 24.0, 3)[:, 0].numpy(), [0, 0, 0])
+
+
+def test_the_fields_tangent_is_kept_across_chunks_while_it_is_the_cheaper() -> None:
+    fields = load_body_fields()
+    x = torch.as_tensor(load_template("tshirt", "low").vertices).expand(8, -1, -1)
+    n = x.shape[1]
+    first = _tangent(fields, x, None)
+    assert first[1] == 0.0 and torch.allclose(first[0].anchor, x[0])
+    assert _tangent(fields, x + 0.005, first) is first  # 5 mm off: still first order
+    moved = x.clone()
+    moved[:, : n // 2] += 0.05  # half of each frame beyond the radius: 4 N exact lookups
+    assert _tangent(fields, moved, first) is first  # fewer than a new tangent's 7 N
+    moved[:, n // 2 :] += 0.05  # all of it: 8 N
+    tangent, far = _tangent(fields, moved, first)
+    assert far == 0.0 and torch.allclose(tangent.anchor, moved.mean(dim=0))
 
 
 @pytest.mark.parametrize(("garment", "vertices"), [("tshirt", 4405), ("dress", 4432)])

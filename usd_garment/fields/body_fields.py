@@ -59,6 +59,8 @@ def _normalized(raw: torch.Tensor) -> torch.Tensor:
 LINEARIZATION_STEP = 2e-3
 #: Points farther than this from their anchor (m) are looked up exactly by the tangent.
 LINEARIZATION_RADIUS = 0.02
+#: Lookups of the anchor points that :meth:`BodyFields.linearized` makes (value, ±step per axis).
+LINEARIZATION_LOOKUPS = 7
 
 
 class BodyFields(torch.nn.Module):
@@ -223,7 +225,8 @@ class BodyFields(torch.nn.Module):
         """The fields and their spatial derivatives at the points ``anchor`` ``(N, 3)`` (central
         differences over ``step`` m): a first-order stand-in for :meth:`all_fields` at points
         within ``radius`` (m) of their anchor, which are looked up exactly farther out (7
-        lookups of N points for a whole chunk of frames instead of one per frame)."""
+        lookups of N points for a whole chunk of frames instead of one per frame: see
+        :data:`LINEARIZATION_LOOKUPS`)."""
         groups = self._fields(anchor, self._all_names)
         sizes = [g.shape[-1] for g in groups]
         values = [torch.cat(groups, dim=-1)]
@@ -417,6 +420,11 @@ class FieldTangent:
     derivative: torch.Tensor
     sizes: list[int]
     radius: float = LINEARIZATION_RADIUS
+
+    def far_count(self, points: torch.Tensor) -> int:
+        """How many of the points ``(B, N, 3)`` lie farther than ``radius`` from their anchor
+        (each an exact lookup for :meth:`all_fields` and :meth:`shaped`)."""
+        return int(((points - self.anchor).norm(dim=-1) > self.radius).sum())
 
     def all_fields(
         self, points: torch.Tensor

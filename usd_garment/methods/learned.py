@@ -24,7 +24,12 @@ from usd_garment.body.model import BodyModel
 from usd_garment.canonical.push_out import push_out_canonical
 from usd_garment.eval.body_distance import BodySurface, body_pool
 from usd_garment.eval.push_out import PUSH_OUT_EPS, PUSH_OUT_PASSES, push_out
-from usd_garment.fields.body_fields import BodyFields, load_body_fields
+from usd_garment.fields.body_fields import (
+    LINEARIZATION_LOOKUPS,
+    BodyFields,
+    FieldTangent,
+    load_body_fields,
+)
 from usd_garment.garment.lod import carry_to_lod
 from usd_garment.garment.model import GarmentModel
 from usd_garment.garment.template import LODS, GarmentTemplate
@@ -251,6 +256,7 @@ class LearnedMethod:
         pose = torch.as_tensor(motion.pose, dtype=torch.float32)
         trans = torch.as_tensor(motion.trans, dtype=torch.float32)
         t_frames = motion.num_frames
+        tangent: tuple[FieldTangent, float] | None = None  # kept across chunks (_tangent)
         lap("load")
         z = predict_latents(model, motion)
         lap("regressor")
@@ -263,14 +269,16 @@ class LearnedMethod:
                     if self.canonical_push:
                         x = push_out_canonical(x, self._fields.sdf)
                         lap("canonical")
-                    tangent = None if self.exact_fields else self._fields.linearized(x.mean(dim=0))
+                    if not self.exact_fields:
+                        tangent = _tangent(self._fields, x, tangent)
+                    first_order = tangent[0] if tangent is not None else None
                     lap("fields")
                     art = garment_model.articulation(betas, pose[s:e], trans[s:e])
                     parts = []
                     # POSE_FRAMES at a time bounds the (t, N, channels) temporaries.
                     for a in range(0, e - s, POSE_FRAMES):
                         b = slice(a, a + POSE_FRAMES)
-                        parts.append(garment_model.pose(x[b], art[b], tangent).vertices)
+                        parts.append(garment_model.pose(x[b], art[b], first_order).vertices)
                     points = torch.cat(parts).numpy()
                     lap("posing")
                 if carried:
@@ -283,6 +291,22 @@ class LearnedMethod:
                     lap("push_out")
                 yield points
                 clock[0] = time.perf_counter()  # the consumer's time (writing) is not ours
+
+
+def _tangent(
+    fields: BodyFields, x: torch.Tensor, last: tuple[FieldTangent, float] | None
+) -> tuple[FieldTangent, float]:
+    """The fields to first order for the canonical garments ``x`` ``(t, N, 3)`` of a chunk, and
+    the far points per frame it had on the chunk it was made for. ``last`` (the previous
+    chunk's) is kept while the exact lookups it needs for ``x`` (its far points, beyond those it
+    had per frame when made) cost less than linearizing again about ``x``'s mean."""
+    if last is not None:
+        tangent, far_per_frame = last
+        extra = tangent.far_count(x) - far_per_frame * len(x)
+        if extra < LINEARIZATION_LOOKUPS * x.shape[1]:
+            return last
+    tangent = fields.linearized(x.mean(dim=0))
+    return tangent, tangent.far_count(x) / len(x)
 
 
 class LearnedPushOutMethod(LearnedMethod):
