@@ -8,6 +8,7 @@ from pathlib import Path
 import click
 
 from usd_garment.body import load_body_model
+from usd_garment.cli.drape import drape
 from usd_garment.cli.errors import user_errors
 from usd_garment.cli.options import body_model_option, json_option, lod_option
 from usd_garment.garment.library import (
@@ -20,8 +21,8 @@ from usd_garment.garment.library import (
     template_filename,
 )
 from usd_garment.garment.summary import garment_summary
-from usd_garment.garment.template import GARMENT_NAMES, LODS
-from usd_garment.garment.templates import RECIPE_VERSION, build_templates
+from usd_garment.garment.template import GARMENT_NAMES, LODS, RECIPE_VERSION
+from usd_garment.garment.templates import build_templates
 
 
 @click.group()
@@ -84,3 +85,6 @@ def build(body_model: Path | None, output: Path | None) -> None:
                     save_template(path, template, provenance)
                     bar.update(1)
     click.echo(f"wrote {len(GARMENT_NAMES) * len(LODS)} templates to {output}")
+
+
+garment.add_command(drape)

@@ -1,44 +1,51 @@
-"""Entry point of the ``usd-garment`` command: registers the command groups."""
+"""Entry point of the ``usd-garment`` command: registers the command groups.
+
+Each command's module is imported when that command runs (or when help lists it), so that
+``usd-garment dress`` does not pay for the imports of training, simulation and the bench.
+"""
 
 from __future__ import annotations
+
+from importlib import import_module
 
 import click
 
 from usd_garment import __version__
-from usd_garment.cli.amass import export_amass, import_amass
-from usd_garment.cli.bench import bench
-from usd_garment.cli.body import body
-from usd_garment.cli.bvh import import_bvh
-from usd_garment.cli.dataset import dataset
-from usd_garment.cli.drape import drape
-from usd_garment.cli.dress import dress
-from usd_garment.cli.evaluate import evaluate
-from usd_garment.cli.fields import fields
-from usd_garment.cli.garment import garment
-from usd_garment.cli.motion import motion
-from usd_garment.cli.project import project
-from usd_garment.cli.simulate import simulate
-from usd_garment.cli.train import train
+
+#: Command name → ``module:attribute`` of its click command, under ``usd_garment.cli``.
+COMMANDS = {
+    "body": "body:body",
+    "garment": "garment:garment",
+    "import-amass": "amass:import_amass",
+    "export-amass": "amass:export_amass",
+    "import-bvh": "bvh:import_bvh",
+    "dress": "dress:dress",
+    "eval": "evaluate:evaluate",
+    "simulate": "simulate:simulate",
+    "dataset": "dataset:dataset",
+    "motion": "motion:motion",
+    "fields": "fields:fields",
+    "project": "project:project",
+    "train": "train:train",
+    "bench": "bench:bench",
+}
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+class LazyGroup(click.Group):
+    """A group whose subcommands (:data:`COMMANDS`) are imported on first use."""
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return sorted(COMMANDS)
+
+    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
+        if cmd_name not in COMMANDS:
+            return None
+        module, _, attribute = COMMANDS[cmd_name].partition(":")
+        command: click.Command = getattr(import_module(f"usd_garment.cli.{module}"), attribute)
+        return command
+
+
+@click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="usd-garment")
 def main() -> None:
     """Dress animated SMPL bodies in USD with learned, collision-free garments."""
-
-
-main.add_command(body)
-main.add_command(garment)
-garment.add_command(drape)
-main.add_command(import_amass)
-main.add_command(export_amass)
-main.add_command(import_bvh)
-main.add_command(dress)
-main.add_command(evaluate)
-main.add_command(simulate)
-main.add_command(dataset)
-main.add_command(motion)
-main.add_command(fields)
-main.add_command(project)
-main.add_command(train)
-main.add_command(bench)

@@ -12,8 +12,6 @@ import numpy as np
 from tqdm import tqdm
 
 from usd_garment.garment.template import LODS
-from usd_garment.sim.cloth import ITERATIONS, SUBSTEPS
-from usd_garment.training.dataset import SPLITS
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -69,6 +67,8 @@ frames_option = click.option(
 
 def solver_options(command: F) -> F:
     """The cloth solver's ``--substeps``, ``--iterations`` and ``--material`` options."""
+    from usd_garment.sim.cloth import ITERATIONS, SUBSTEPS  # here: ``dress`` need not load it
+
     for option in reversed((
         click.option("--substeps", type=click.IntRange(1, 64), default=SUBSTEPS,
                      show_default=True, help="Solver substeps per 30 fps frame."),
@@ -83,6 +83,8 @@ def solver_options(command: F) -> F:
 
 def splits_option(help_text: str) -> Callable[[F], F]:
     """``--split``: comma-separated dataset splits, all by default, stored as ``split_names``."""
+    from usd_garment.training.dataset import SPLITS  # here: ``dress`` need not load it
+
     return click.option(
         "--split", "split_names", default=",".join(SPLITS), show_default=True, help=help_text
     )
