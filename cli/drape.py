@@ -20,8 +20,7 @@ from usd_garment.garment.library import (
     template_dir,
     template_filename,
 )
-from usd_garment.garment.template import GARMENT_NAMES, LODS
-from usd_garment.garment.templates import RECIPE_VERSION
+from usd_garment.garment.template import GARMENT_NAMES, LODS, RECIPE_VERSION
 from usd_garment.sim.drape import drape_template
 
 

@@ -28,8 +28,8 @@ from usd_garment.garment.mesh_ops import (
 )
 from usd_garment.garment.summary import clearance
 from usd_garment.garment.surface_nets import surface_nets
-from usd_garment.garment.template import GARMENT_NAMES, LODS, GarmentTemplate
-from usd_garment.garment.templates import RECIPE_VERSION, recipe, rest_body
+from usd_garment.garment.template import GARMENT_NAMES, LODS, RECIPE_VERSION, GarmentTemplate
+from usd_garment.garment.templates import recipe, rest_body
 
 CASES = [(name, lod) for name in GARMENT_NAMES for lod in LODS]
 

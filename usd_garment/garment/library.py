@@ -25,8 +25,7 @@ from usd_garment.atomic import atomic_output
 from usd_garment.body.io import load_body_model
 from usd_garment.body.joints import NUM_BETAS
 from usd_garment.body.model import BodyModel
-from usd_garment.garment.template import GARMENT_NAMES, LODS, GarmentTemplate
-from usd_garment.garment.templates import RECIPE_VERSION, make_template
+from usd_garment.garment.template import GARMENT_NAMES, LODS, RECIPE_VERSION, GarmentTemplate
 
 
 @dataclass(frozen=True)
@@ -149,6 +148,9 @@ def load_template(
             f"no draped {name} ({lod}) for this body yet: run 'usd-garment garment drape {name} "
             f"--lod {lod} --body-model {body_model_path}'"
         )
+    # Here, not at the top: the recipe's scipy (ndimage, qhull) is for building templates only.
+    from usd_garment.garment.templates import make_template
+
     template = make_template(body, name, lod)
     folder.mkdir(parents=True, exist_ok=True)
     save_template(path, template, provenance)

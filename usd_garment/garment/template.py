@@ -9,6 +9,9 @@ import numpy as np
 #: Garment names and levels of detail (target vertex counts) the package knows.
 GARMENT_NAMES: tuple[str, ...] = ("tshirt", "dress")
 LODS: dict[str, int] = {"high": 4400, "medium": 2000, "low": 1000}
+#: Version of the recipe that builds templates (``garment.templates``), bumped whenever it
+#: changes the output; stored in template files and cache keys.
+RECIPE_VERSION = 1
 
 
 @dataclass

@@ -24,8 +24,6 @@ from usd_garment.garment.mesh_ops import boundary_loops, cut, is_manifold, relax
 from usd_garment.garment.surface_nets import surface_nets
 from usd_garment.garment.template import GARMENT_NAMES, LODS, GarmentTemplate
 
-#: Bumped whenever the recipe changes the output; stored in template files and cache keys.
-RECIPE_VERSION = 1
 #: Step (m) of the fine grid that holds the hull field.
 FINE_SPACING = 0.005
 #: Distance (m) between the closed body hull and the garment surface.
