@@ -104,18 +104,6 @@ class BodyModel(torch.nn.Module):
         v_shaped = self.v_template + blend_shapes(betas, self.shapedirs)
         return v_shaped, vertices2joints(self.J_regressor, v_shaped)
 
-    def shaped_frames(
-        self, betas: torch.Tensor, frames: int
-    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Betas ``(B, 10)``, rest-pose vertices ``(B, V, 3)`` and joints ``(B, J, 3)`` of
-        ``frames`` = B frames for betas ``(B, 10)``, or for one shape ``(10,)``: then shaped once
-        and broadcast over the frames (expanded views; do not write into them)."""
-        if betas.dim() != 1:
-            return (betas, *self.shaped(betas))
-        v_shaped, joints = self.shaped(betas[None])
-        expand = (frames, -1, -1)
-        return betas.expand(frames, -1), v_shaped.expand(*expand), joints.expand(*expand)
-
     def forward(
         self,
         betas: torch.Tensor,
@@ -130,7 +118,9 @@ class BodyModel(torch.nn.Module):
             trans: ``(B, 3)`` root translation (m), or None for zero.
         """
         b = pose.shape[0]
-        betas, v_shaped, rest_joints = self.shaped_frames(betas, b)
+        if betas.dim() == 1:  # shaped per frame: the simulations' bodies stay bit for bit
+            betas = betas.expand(b, -1)
+        v_shaped, rest_joints = self.shaped(betas)
         rot_mats = batch_rodrigues(pose.reshape(b, NUM_JOINTS, 3))
         rest_vertices = v_shaped
         if self.has_pose_blendshapes:

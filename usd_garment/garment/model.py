@@ -79,7 +79,11 @@ class GarmentModel(torch.nn.Module):
             trans: ``(B, 3)`` root translation (m), or None for zero.
         """
         b = pose.shape[0]
-        betas, _, rest_joints = self.body.shaped_frames(betas, b)
+        if betas.dim() == 1:  # one shape: its joints once, not once per frame
+            _, joints = self.body.shaped(betas[None])
+            betas, rest_joints = betas.expand(b, -1), joints.expand(b, -1, -1)
+        else:
+            _, rest_joints = self.body.shaped(betas)
         rot_mats = batch_rodrigues(pose.reshape(b, NUM_JOINTS, 3))
         _, transforms = batch_rigid_transform(rot_mats, rest_joints, self.body.parents)
         if trans is not None:
