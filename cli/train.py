@@ -216,35 +216,3 @@ def combine(models: tuple[Path, ...], out: Path, version: str | None) -> None:  
         )
         save_learned_model(out, model)
     click.echo(f"wrote the model {out}: {len(model.members)} members")
-
-
-@train.command("smooth", short_help="Set the time filter of a model's latent codes.")
-@click.argument("model_dir", type=click.Path(file_okay=False, path_type=Path))
-@click.option(
-    "--sigma",
-    type=click.FloatRange(min=0.0),
-    required=True,
-    help="Standard deviation (frames at the model's 30 fps) of the Gaussian filter over the "
-    "regressors' latent codes along time; 0 turns it off.",
-)
-@click.option(
-    "--out",
-    type=click.Path(file_okay=False, path_type=Path),
-    default=None,
-    help="Model directory to write (default: MODEL_DIR itself).",
-)
-def smooth(model_dir: Path, sigma: float, out: Path | None) -> None:
-    """Filter the latent codes that MODEL_DIR's regressors predict along time (less jitter,
-    less dynamics): choose SIGMA on validation motions, e.g. with `usd-garment bench --split
-    validation --model LABEL=DIR` over copies of the model at several values."""
-    out = out if out is not None else model_dir
-    with user_errors():
-        from usd_garment.methods.learned_model import load_learned_model, save_learned_model
-
-        model = load_learned_model(model_dir)
-        model.smoothing = sigma
-        model.info["smoothing_command"] = "usd-garment " + shlex.join(
-            ["train", "smooth", str(model_dir), "--sigma", f"{sigma:g}", "--out", str(out)]
-        )
-        save_learned_model(out, model)
-    click.echo(f"wrote the model {out}: latent codes filtered with sigma {sigma:g} frames")

@@ -107,21 +107,7 @@ def predict_latents(model: LearnedModel, motion: SmplMotion) -> torch.Tensor:
         gammas.append(gamma)
     with ThreadPoolExecutor(len(model.members)) as pool:
         codes = list(pool.map(lambda m, g: m.regressor.predict(g, betas), model.members, gammas))
-    smooth = smooth_codes(torch.cat(codes, dim=1), model.smoothing)
-    return to_frames(smooth, motion.fps, motion.num_frames)
-
-
-def smooth_codes(values: torch.Tensor, sigma: float) -> torch.Tensor:
-    """``values`` ``(T', L)`` filtered along time with a normalised Gaussian of standard
-    deviation ``sigma`` samples (truncated at 3σ; the first and last samples repeated beyond
-    the ends, so a constant stays constant); ``sigma`` 0: unchanged."""
-    if sigma <= 0.0 or values.shape[0] < 2:
-        return values
-    radius = int(np.ceil(3.0 * sigma))
-    kernel = torch.exp(-0.5 * (torch.arange(-radius, radius + 1, dtype=values.dtype) / sigma) ** 2)
-    padded = torch.cat([values[:1].expand(radius, -1), values, values[-1:].expand(radius, -1)])
-    out = torch.nn.functional.conv1d(padded.T[:, None], (kernel / kernel.sum())[None, None])
-    return out[:, 0].T.contiguous()
+    return to_frames(torch.cat(codes, dim=1), motion.fps, motion.num_frames)
 
 
 def to_frames(values: torch.Tensor, fps: float, count: int) -> torch.Tensor:
@@ -192,7 +178,6 @@ class LearnedMethod:
                 garment=self._model.garment,
                 lod=self._model.lod,
                 members=len(self._model.members),
-                latent_smoothing=self._model.smoothing,
                 version=self._model.version,
                 body_fingerprint=self._model.body_fingerprint,
             )

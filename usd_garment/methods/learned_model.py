@@ -36,10 +36,9 @@ from usd_garment.regressor.pose_code import PoseCodec
 MODEL_FORMAT = 2
 READ_FORMATS = (1, 2)
 #: The keys of ``model.json`` that describe the layout rather than the model's history.
-_LAYOUT_KEYS = frozenset((
-    "format", "garment", "lod", "vertices", "version", "body", "architecture", "members",
-    "latent_smoothing",
-))  # fmt: skip
+_LAYOUT_KEYS = frozenset(
+    ("format", "garment", "lod", "vertices", "version", "body", "architecture", "members")
+)
 CONFIG_NAME = "model.json"
 WEIGHTS_NAME = "weights.safetensors"
 #: The networks of a model and their classes.
@@ -96,8 +95,6 @@ class LearnedModel:
         body_name, body_fingerprint: the body model it was trained for.
         info: everything else of ``model.json`` (training command, config, wall time, machine,
             held-out figures).
-        smoothing: σ (frames at the model's 30 fps) of the Gaussian filter over the
-            regressors' latent codes along time (``model.json``'s ``latent_smoothing``); 0: none.
     """
 
     members: list[Member]
@@ -108,7 +105,6 @@ class LearnedModel:
     body_name: str
     body_fingerprint: str
     info: dict[str, Any] = field(default_factory=dict)
-    smoothing: float = 0.0
 
     @property
     def latent_sizes(self) -> list[int]:
@@ -170,7 +166,6 @@ def save_learned_model(
         "version": model.version,
         "body": {"name": model.body_name, "fingerprint": model.body_fingerprint},
         "members": members,
-        "latent_smoothing": model.smoothing,
         **model.info,
     }
     with atomic_output(path / CONFIG_NAME) as tmp:
@@ -205,18 +200,14 @@ def load_learned_model(path: str | Path, body: BodyModel | None = None) -> Learn
         ]
         meta = {k: config[k] for k in ("garment", "lod", "vertices", "version")}
         body_name, fingerprint = config["body"]["name"], config["body"]["fingerprint"]
-        smoothing = float(config.get("latent_smoothing", 0.0))
-    except (KeyError, TypeError, ValueError, RuntimeError) as exc:
+    except (KeyError, TypeError, RuntimeError) as exc:
         raise ModelError(f"{path}: model files do not match ({exc})") from None
     if not members:
         raise ModelError(f"{path}: a model with no members")
     info = {k: v for k, v in config.items() if k not in _LAYOUT_KEYS}
-    if not smoothing >= 0.0:
-        raise ModelError(f"{path}: latent_smoothing must be ≥ 0, not {smoothing}")
     model = LearnedModel(
-        members, **meta, body_name=body_name, body_fingerprint=fingerprint, info=info,
-        smoothing=smoothing,
-    )  # fmt: skip
+        members, **meta, body_name=body_name, body_fingerprint=fingerprint, info=info
+    )
     if body is not None:
         model.check_body(body)
     return model
