@@ -130,9 +130,10 @@ class LearnedMethod:
             of the template's garment.
         fields: the body's diffused fields for M_G; the default body's by default.
         exact_fields: look the fields up at every frame's canonical garment; by default they
-            are taken to first order about each chunk's mean canonical garment (exactly only
-            for vertices more than 2 cm from it): several times faster, within 0.2 mm on
-            average of the exact M_G (:meth:`BodyFields.linearized`).
+            are taken to first order about a chunk's mean canonical garment, kept for the
+            next chunks while that is cheaper than linearizing again (:func:`_tangent`;
+            exactly only for vertices more than 2 cm from the anchor): several times faster,
+            within 0.2 mm on average of the exact M_G (:meth:`BodyFields.linearized`).
     """
 
     name = "learned"
