@@ -62,7 +62,13 @@ def dataset() -> None:
 
 @dataset.command("make")
 @click.option("--garment", type=click.Choice(GARMENT_NAMES), default="tshirt", show_default=True)
-@click.option("--motions", type=click.IntRange(1), default=12, show_default=True)
+@click.option(
+    "--motions",
+    type=click.IntRange(0),
+    default=12,
+    show_default=True,
+    help="Procedural motions (0: the captures alone).",
+)
 @click.option("--shapes", type=click.IntRange(1), default=3, show_default=True)
 @click.option("--frames", type=click.IntRange(1), default=90, show_default=True)
 @lod_option

@@ -149,6 +149,21 @@ def test_captures_join_the_plan_with_their_splits(tmp_path: Path) -> None:
         DatasetConfig(captures=((str(tmp_path / "none.bvh"), "train"),))
 
 
+def test_a_set_of_captures_alone_has_no_procedural_motion(tmp_path: Path) -> None:
+    capture = tmp_path / "folded.usda"
+    capture.write_text("#usda 1.0\n")
+    config = DatasetConfig(
+        motions=0, shapes=2, captures=((str(capture), "train"),), capture_shapes=2
+    )
+    specs = plan_sequences(config)
+    assert [(s.name, s.split, s.motion_index) for s in specs] == [
+        ("c00_s0", "train", 0),
+        ("c00_s1", "train", 0),
+    ]
+    with pytest.raises(ValueError, match="needs captures"):
+        DatasetConfig(motions=0)
+
+
 def test_train_only_puts_every_procedural_motion_in_train(tmp_path: Path) -> None:
     capture = tmp_path / "walk.usda"
     capture.write_text("#usda 1.0\n")

@@ -65,7 +65,8 @@ class DatasetConfig:
 
     Attributes:
         garment: garment name; lod: its level of detail.
-        motions: number of motions N; shapes: number of body shapes M (N × M sequences).
+        motions: number of motions N (0 for a set of captures alone); shapes: number of body
+            shapes M (N × M sequences).
         frames: frames per sequence at ``fps``.
         seed: seed of the motion kinds and seeds, the shapes and the split.
         substeps, iterations: solver steps per frame and iterations per step.
@@ -103,8 +104,10 @@ class DatasetConfig:
             raise ValueError(f"unknown garment '{self.garment}' ({', '.join(GARMENT_NAMES)})")
         if self.lod not in LODS:
             raise ValueError(f"unknown level of detail '{self.lod}' ({', '.join(LODS)})")
-        if self.motions < 1 or self.shapes < 1 or self.frames < 1 or not self.fps > 0:
-            raise ValueError("motions, shapes and frames must be >= 1 and fps > 0")
+        if self.motions < 0 or self.shapes < 1 or self.frames < 1 or not self.fps > 0:
+            raise ValueError("motions must be >= 0, shapes and frames >= 1 and fps > 0")
+        if self.motions == 0 and not self.captures:
+            raise ValueError("a dataset of no procedural motions needs captures")
         if not self.shape_sigma > 0:
             raise ValueError("shape_sigma must be > 0")
         unknown = [k for k in self.kinds if k not in MOTION_KINDS]
