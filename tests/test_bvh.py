@@ -349,6 +349,12 @@ def test_units_and_up_axis_do_not_change_the_motion(body_model: BodyModel) -> No
     scaled, info = retarget(cm, body_model, scale=0.01, arm_clearance=None)
     assert info.units == "custom" and not info.units_detected
     np.testing.assert_allclose(scaled.pose, results[0][0].pose, atol=1e-6)
+    # B. Hahne's conversion of the CMU database keeps CMU's unit, 1/0.45 inch.
+    cmu_unit = 0.0254 / 0.45
+    cmu = parse_bvh(bvh_text(mixamo_skeleton(rest / cmu_unit, cm=False), angles, root / cmu_unit))
+    in_cmu_units, info = retarget(cmu, body_model, arm_clearance=None)
+    assert info.units == "cmu" and info.units_detected
+    np.testing.assert_allclose(in_cmu_units.trans, results[0][0].trans, atol=2e-5)
     tiny = parse_bvh(bvh_text(mixamo_skeleton(rest * 0.1, cm=False), {}, root * 0.1))
     with pytest.raises(BvhError, match="cannot tell the units"):
         retarget(tiny, body_model)

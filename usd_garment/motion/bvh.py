@@ -53,11 +53,19 @@ from usd_garment.motion.resample import resample_motion
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.usd.joint_aliases import normalize_joint_name
 
-#: Metres per file unit of the unit names ``--units`` accepts.
-UNITS: dict[str, float] = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "ft": 0.3048}
+#: Metres per file unit of the unit names ``--units`` accepts; "cmu" is the length unit of the
+#: CMU database's ASF skeletons (1/0.45 inch), kept by B. Hahne's BVH conversion (cgspeed).
+UNITS: dict[str, float] = {
+    "m": 1.0,
+    "cm": 0.01,
+    "mm": 0.001,
+    "in": 0.0254,
+    "ft": 0.3048,
+    "cmu": 0.0254 / 0.45,
+}
 
 #: Units that ``units="auto"`` chooses between, by the rest skeleton's height.
-AUTO_UNITS: tuple[str, ...] = ("m", "cm", "mm")
+AUTO_UNITS: tuple[str, ...] = ("m", "cm", "mm", "cmu")
 
 #: Heights (m) of the rest skeleton that automatic unit detection accepts.
 PLAUSIBLE_HEIGHT_M: tuple[float, float] = (0.5, 3.0)
