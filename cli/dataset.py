@@ -160,7 +160,9 @@ def make(
         if bar is None:
             bar = tqdm(total=total, desc="sequences", unit="seq", disable=None)
         bar.update(done - bar.n)
-        if entry["status"] != "ok":
+        if entry["status"] == "error":
+            tqdm.write(f"sequence {entry['name']} failed (--resume retries): {entry['message']}")
+        elif entry["status"] != "ok":
             tqdm.write(f"bad sequence {entry['name']}: {entry['message']}")
 
     try:
@@ -184,14 +186,18 @@ def make(
     summary = manifest["summary"]
     if as_json:
         click.echo(json.dumps(summary, indent=2))
-        return
-    pending = summary["sequences"] - summary["ok"] - summary["bad"]
-    click.echo(
-        f"{summary['ok']} of {summary['sequences']} sequences ok ({summary['bad']} bad"
-        f"{f', {pending} pending' if pending else ''}), {summary['frames_ok']} frames, "
-        f"{summary['bytes'] / 1e6:.1f} MB; "
-        f"manifest {output / MANIFEST_NAME}"
-    )
+    else:
+        errors = summary.get("errors", 0)
+        pending = summary["sequences"] - summary["ok"] - summary["bad"] - errors
+        click.echo(
+            f"{summary['ok']} of {summary['sequences']} sequences ok ({summary['bad']} bad"
+            f"{f', {errors} failed with an error' if errors else ''}"
+            f"{f', {pending} pending' if pending else ''}), {summary['frames_ok']} frames, "
+            f"{summary['bytes'] / 1e6:.1f} MB; "
+            f"manifest {output / MANIFEST_NAME}"
+        )
+    if summary.get("errors", 0):
+        raise SystemExit(1)
 
 
 @dataset.command("floor")

@@ -4,8 +4,10 @@ with a manifest, resuming without redoing finished sequences, bad sequences mark
 from __future__ import annotations
 
 import json
+import pickle
 from dataclasses import asdict
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -221,6 +223,38 @@ def test_a_captured_body_layer_is_simulated_whole(tmp_path: Path, body_model: Bo
     assert points.shape[0] == 4
     code, output = _run(["dataset", "make", "--capture", capture, "-o", tmp_path / "x"])
     assert code != 0 and "FILE:SPLIT" in output
+
+
+def test_a_sequence_that_errors_is_recorded_and_the_others_go_on(tmp_path: Path) -> None:
+    broken = tmp_path / "broken.usda"
+    broken.write_text("#usda 1.0\n(\n")  # not a USD layer: reading it raises
+    out = tmp_path / "data"
+    args = ["dataset", "make", "--motions", "1", "--shapes", "1", "--frames", "2", "--lod", "low",
+            "--workers", "1", "--capture", f"{broken}:train", "-o", out]  # fmt: skip
+    code, output = _run(args)
+    assert code == 1 and "sequence c00_s0 failed (--resume retries)" in output, output
+    entries = {e["name"]: e for e in read_manifest(out)["sequences"]}
+    assert entries["m00_s0"]["status"] == "ok"
+    assert entries["c00_s0"]["status"] == "error" and entries["c00_s0"]["message"]
+    assert read_manifest(out)["summary"]["errors"] == 1
+    assert sorted(p.name for p in out.iterdir() if p.name.startswith("c00")) == []
+
+
+def test_a_worker_sends_back_an_error_it_could_not_pickle(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    class Unpicklable(RuntimeError):
+        def __reduce__(self) -> Any:
+            raise TypeError("not picklable")  # as pxr.Tf.Error
+
+    def fail(*_: object) -> dict[str, Any]:
+        raise Unpicklable("a USD error")
+
+    monkeypatch.setattr(dataset_module, "run_sequence", fail)
+    spec = plan_sequences(DatasetConfig(motions=1, shapes=1))[0]
+    entry = dataset_module._run_task((str(tmp_path), DatasetConfig(), spec))
+    assert pickle.loads(pickle.dumps(entry)) == entry
+    assert entry["status"] == "error" and "a USD error" in entry["message"]
 
 
 def test_a_bvh_capture_plays_whole_at_the_dataset_rate(body_model: BodyModel) -> None:

@@ -250,6 +250,10 @@ def run_sequence(folder: str, config: DatasetConfig, spec: SequenceSpec) -> dict
 
     Returns:
         Its manifest entry; on a failed simulation status "bad" and no files left behind.
+
+    Raises:
+        Whatever reading the capture, writing the layers or the simulator raise besides a
+        failed simulation (``make_dataset`` records those as status "error").
     """
     started = time.perf_counter()
     out = Path(folder)
@@ -297,7 +301,18 @@ def _fixed(config: dict[str, Any]) -> dict[str, Any]:
 
 
 def _run_task(task: tuple[str, DatasetConfig, SequenceSpec]) -> dict[str, Any]:
-    return run_sequence(*task)
+    """``run_sequence``, with any other error than a failed simulation recorded as the entry's
+    status "error" and its message: the other sequences go on, ``resume`` tries it again, and
+    a worker never has to send an exception back (USD's are not picklable: one ended a whole
+    pool, and the sequences simulating beside it, with an error that did not say what failed)."""
+    folder, config, spec = task
+    try:
+        return run_sequence(folder, config, spec)
+    except Exception as exc:  # recorded in the manifest, reported by the CLI
+        for name in (body_file(spec), garment_file(spec, config.garment)):
+            (Path(folder) / name).unlink(missing_ok=True)
+        message = " ".join(f"{type(exc).__name__}: {exc}".split())
+        return {**asdict(spec), "status": "error", "message": message, "files": {}}
 
 
 def sequence_is_done(folder: Path, config: DatasetConfig, entry: dict[str, Any] | None) -> bool:
@@ -395,6 +410,7 @@ def _write_manifest(folder: Path, manifest: dict[str, Any]) -> None:
         "sequences": len(manifest["sequences"]),
         "ok": len(ok),
         "bad": sum(s["status"] == "bad" for s in manifest["sequences"]),
+        "errors": sum(s["status"] == "error" for s in manifest["sequences"]),
         "frames_ok": sum(s["frames"] for s in ok),
         "bytes": sum((folder / f).stat().st_size for s in ok for f in s["files"].values()),
     }
