@@ -6,7 +6,10 @@ Each command's module is imported when that command runs (or when help lists it)
 
 from __future__ import annotations
 
+import signal
+import sys
 from importlib import import_module
+from types import FrameType
 
 import click
 
@@ -49,3 +52,11 @@ class LazyGroup(click.Group):
 @click.version_option(__version__, prog_name="usd-garment")
 def main() -> None:
     """Dress animated SMPL bodies in USD with learned, collision-free garments."""
+    signal.signal(signal.SIGTERM, _exit_on_sigterm)
+
+
+def _exit_on_sigterm(signum: int, _frame: FrameType | None) -> None:
+    """``kill`` ends a command as Ctrl-C does, through its ``with`` blocks: worker pools are
+    terminated (orphaned workers of a killed ``dataset make`` went on writing into its folder)
+    and temporary files removed; exit status 128 + the signal's number."""
+    sys.exit(128 + signum)

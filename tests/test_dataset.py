@@ -3,8 +3,14 @@ with a manifest, resuming without redoing finished sequences, bad sequences mark
 
 from __future__ import annotations
 
+import contextlib
 import json
+import os
 import pickle
+import signal
+import subprocess
+import sys
+import time
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -255,6 +261,48 @@ def test_a_worker_sends_back_an_error_it_could_not_pickle(
     entry = dataset_module._run_task((str(tmp_path), DatasetConfig(), spec))
     assert pickle.loads(pickle.dumps(entry)) == entry
     assert entry["status"] == "error" and "a USD error" in entry["message"]
+
+
+def _children(pid: int) -> set[int]:
+    """Processes whose parent is ``pid`` (Linux /proc)."""
+    found = set()
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            found.add(int(stat.parent.name))
+    return found
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").is_file(), reason="needs Linux /proc")
+def test_kill_ends_the_dataset_workers_with_the_command(tmp_path: Path) -> None:
+    """SIGTERM to ``dataset make`` terminates its pool: no worker goes on writing the folder."""
+    out = tmp_path / "data"
+    command = [sys.executable, "-c", "from usd_garment.cli.main import main; main()",
+               "dataset", "make", "--motions", "2", "--shapes", "1", "--frames", "40",
+               "--lod", "low", "--workers", "2", "-o", str(out)]  # fmt: skip
+    process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    workers: set[int] = set()
+    try:
+        deadline = time.monotonic() + 120.0
+        while time.monotonic() < deadline and not (out / "manifest.json").is_file():
+            time.sleep(0.2)
+        time.sleep(1.0)  # the pool starts right after the first manifest
+        workers = _children(process.pid)
+        assert workers, "the pool did not start"
+        process.send_signal(signal.SIGTERM)
+        assert process.wait(timeout=60) == 128 + signal.SIGTERM
+        deadline = time.monotonic() + 30.0
+        while time.monotonic() < deadline and any(Path(f"/proc/{w}").exists() for w in workers):
+            time.sleep(0.2)
+        assert not any(Path(f"/proc/{w}/stat").is_file() for w in workers)
+    finally:
+        process.kill()
+        for worker in workers:  # left behind only if the test failed
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(worker, signal.SIGKILL)
 
 
 def test_a_bvh_capture_plays_whole_at_the_dataset_rate(body_model: BodyModel) -> None:
