@@ -184,10 +184,10 @@ def make(
         if bar is not None:
             bar.close()
     summary = manifest["summary"]
+    errors = summary["errors"]
     if as_json:
         click.echo(json.dumps(summary, indent=2))
     else:
-        errors = summary.get("errors", 0)
         pending = summary["sequences"] - summary["ok"] - summary["bad"] - errors
         click.echo(
             f"{summary['ok']} of {summary['sequences']} sequences ok ({summary['bad']} bad"
@@ -196,7 +196,7 @@ def make(
             f"{summary['bytes'] / 1e6:.1f} MB; "
             f"manifest {output / MANIFEST_NAME}"
         )
-    if summary.get("errors", 0):
+    if errors:
         raise SystemExit(1)
 
 

@@ -286,10 +286,9 @@ def test_kill_ends_the_dataset_workers_with_the_command(tmp_path: Path) -> None:
     process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     workers: set[int] = set()
     try:
-        deadline = time.monotonic() + 120.0
-        while time.monotonic() < deadline and not (out / "manifest.json").is_file():
+        deadline = time.monotonic() + 120.0  # the pool's two workers (and resource tracker)
+        while time.monotonic() < deadline and len(_children(process.pid)) < 2:
             time.sleep(0.2)
-        time.sleep(1.0)  # the pool starts right after the first manifest
         workers = _children(process.pid)
         assert workers, "the pool did not start"
         process.send_signal(signal.SIGTERM)
