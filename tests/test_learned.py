@@ -209,13 +209,15 @@ def test_shipped_model_is_the_default(
     assert np.isfinite(points).all()
 
 
-def test_the_shipped_members_were_trained_with_the_committed_settings() -> None:
-    """Each member of the shipped T-shirt ensemble records the settings of its
-    ``examples/train/tshirt_memberN.json`` (seed, GRU width, VAE epochs; defaults elsewhere)."""
+@pytest.mark.parametrize("garment", ["tshirt", "dress"])
+def test_the_shipped_members_were_trained_with_the_committed_settings(garment: str) -> None:
+    """Each member of a shipped ensemble records the settings of its
+    ``examples/train/tshirt_memberN.json`` (seed, GRU width, VAE epochs; defaults elsewhere):
+    the dress's members were trained with the T-shirt's settings files."""
     from usd_garment.methods.learned import shipped_model
     from usd_garment.training.pipeline import TrainSettings
 
-    folder = shipped_model("tshirt")
+    folder = shipped_model(garment)
     assert folder is not None
     configs = sorted((Path(__file__).parent.parent / "examples" / "train").glob("tshirt_member*"))
     members = load_learned_model(folder).members
