@@ -102,6 +102,7 @@ def _run(
         from usd_garment.body.io import load_body_model
         from usd_garment.canonical.dataset import load_canonical_set
         from usd_garment.fields.body_fields import load_body_fields
+        from usd_garment.methods.learned_model import CURVES_NAME, LOG_NAME
         from usd_garment.training.pipeline import (
             STAGES,
             assemble_model,
@@ -142,8 +143,8 @@ def _run(
                 records[stage] = load_stage(out, stage)[1]
             except FileNotFoundError:
                 continue
-        plot_curves(records, out / "curves.png")
-        click.echo(f"wrote {out / 'curves.png'}, log {out / 'train.log'}")
+        plot_curves(records, out / CURVES_NAME)
+        click.echo(f"wrote {out / CURVES_NAME}, log {out / LOG_NAME}")
         if len(records) == len(STAGES):
             command = _command_line(stages, data, out, device, config_path, ablation, epochs)
             assemble_model(out, canonical, body, settings, {"command": command})
@@ -204,9 +205,15 @@ def compare(runs: tuple[Path, ...], output: Path) -> None:
 def combine(models: tuple[Path, ...], out: Path, version: str | None) -> None:  # fmt: skip
     """One model whose garment is the mean of the canonical garments of MODELS (trained on the
     same garment and body, e.g. with other seeds): each model's networks run, their decodings
-    are averaged and posed once. Each member keeps its own training command and figures."""
+    are averaged and posed once. Each member keeps its own training command and figures; its
+    training curves and log are copied beside the model (curves_member{i}.png,
+    train_member{i}.log)."""
     with user_errors():
-        from usd_garment.methods.learned_model import combine_models, save_learned_model
+        from usd_garment.methods.learned_model import (
+            combine_models,
+            copy_member_records,
+            save_learned_model,
+        )
 
         if any(out.resolve() == path.resolve() for path in models):
             raise click.BadParameter(f"{out} is one of the models combined", param_hint="--out")
@@ -215,4 +222,5 @@ def combine(models: tuple[Path, ...], out: Path, version: str | None) -> None:  
             ["train", "combine", *map(str, models), "--out", str(out), "--version", model.version]
         )
         save_learned_model(out, model)
-    click.echo(f"wrote the model {out}: {len(model.members)} members")
+        records = copy_member_records(list(models), out)
+    click.echo(f"wrote the model {out}: {len(model.members)} members, {records} curves and logs")

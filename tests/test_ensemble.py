@@ -54,9 +54,14 @@ def _members(tmp_path: Path, body: BodyModel, template: GarmentTemplate) -> list
 
 def test_combined_model_is_the_mean_of_its_members(tmp_path, body, template):
     first, second = _members(tmp_path, body, template)
+    for path in (first, second):  # what 'train all' leaves beside a model
+        (path / "curves.png").write_bytes(f"curves of {path.name}".encode())
+        (path / "train.log").write_text(f"log of {path.name}\n")
     out = tmp_path / "ensemble"
     code, output = _run(["train", "combine", first, second, "--out", out])
-    assert code == 0 and "2 members" in output, output
+    assert code == 0 and "2 members, 4 curves and logs" in output, output
+    assert (out / "curves_member1.png").read_bytes() == b"curves of seed1"
+    assert (out / "train_member0.log").read_text() == "log of seed0\n"
     ensemble = load_learned_model(out, body)
     a, b = load_learned_model(first), load_learned_model(second)
     assert ensemble.version == "test-ensemble" and ensemble.latent_sizes == [25, 25]
@@ -77,6 +82,8 @@ def test_combined_model_is_the_mean_of_its_members(tmp_path, body, template):
     assert code == 0 and "3 members" in output, output
     sources = [m.info["source"] for m in load_learned_model(tmp_path / "three").members]
     assert sources == [str(first), str(second), str(first)]
+    logs = [(tmp_path / "three" / f"train_member{i}.log").read_text() for i in range(3)]
+    assert logs == ["log of seed0\n", "log of seed1\n", "log of seed0\n"]
 
     layer = tmp_path / "walk.usda"
     write_body_layer(layer, motion, body)

@@ -9,7 +9,8 @@ once (an ensemble; :func:`combine_models` makes one from trained models).
 
 ``model.json`` also carries what a person needs to trust it: the command and configuration that
 trained it (each member's, for an ensemble), the training wall time and machine, and its
-held-out figures.
+held-out figures. Beside them, a trained model keeps its training curves and log (an ensemble,
+each member's).
 """
 
 from __future__ import annotations
@@ -41,6 +42,10 @@ _LAYOUT_KEYS = frozenset(
 )
 CONFIG_NAME = "model.json"
 WEIGHTS_NAME = "weights.safetensors"
+#: A training run's pictures and plain-text log beside its model files; an ensemble keeps its
+#: members' as ``curves_member{i}.png`` and ``train_member{i}.log``.
+CURVES_NAME = "curves.png"
+LOG_NAME = "train.log"
 #: The networks of a model and their classes.
 PARTS: dict[str, type[torch.nn.Module]] = {
     "vae": GarmentVAE,
@@ -272,3 +277,33 @@ def combine_models(paths: list[str | Path], version: str | None = None) -> Learn
         body_name=first.body_name,
         body_fingerprint=first.body_fingerprint,
     )
+
+
+def _member_name(name: str, index: int) -> str:
+    """``curves.png`` → ``curves_member{index}.png`` (likewise ``train.log``)."""
+    stem, suffix = name.rsplit(".", 1)
+    return f"{stem}_member{index}.{suffix}"
+
+
+def copy_member_records(paths: list[str | Path], out: str | Path) -> int:
+    """Copy the training curves and logs of the members of the models ``paths`` into the combined
+    model directory ``out`` (existing), numbered as :func:`combine_models` numbers the members:
+    ``curves_member{i}.png`` and ``train_member{i}.log``, each written to a temporary file and
+    renamed. A one-member model keeps them as ``curves.png`` and ``train.log`` (a ``train all``
+    run), an ensemble under the numbered names. Returns how many files were copied (a member
+    without them is skipped).
+    """
+    copied, index = 0, 0
+    for path in map(Path, paths):
+        count = len(load_learned_model(path).members)
+        for member in range(count):
+            for name in (CURVES_NAME, LOG_NAME):
+                sources = [path / _member_name(name, member)]
+                sources += [path / name] if count == 1 else []
+                source = next((s for s in sources if s.is_file()), None)
+                if source is not None:
+                    with atomic_output(Path(out) / _member_name(name, index)) as tmp:
+                        tmp.write_bytes(source.read_bytes())
+                    copied += 1
+            index += 1
+    return copied

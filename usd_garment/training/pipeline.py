@@ -28,6 +28,7 @@ from usd_garment.canonical.dataset import CanonicalSet
 from usd_garment.fields.body_fields import BodyFields
 from usd_garment.generative.vae import GarmentVAE
 from usd_garment.methods.learned_model import (
+    LOG_NAME,
     PARTS,
     LearnedModel,
     Member,
@@ -144,7 +145,7 @@ def _log(folder: Path, stage: str) -> Callable[[int, int, dict[str, Any]], None]
             for k, v in row.items()
             if isinstance(v, (int, float)) and k != "epoch"
         )
-        with open(folder / "train.log", "a", encoding="utf-8") as log:
+        with open(folder / LOG_NAME, "a", encoding="utf-8") as log:
             log.write(f"{time.strftime('%Y-%m-%d %H:%M:%S')} {stage} {epoch}/{total} {figures}\n")
 
     return write
