@@ -6,6 +6,8 @@ loads."""
 from __future__ import annotations
 
 import json
+import os
+import stat
 from pathlib import Path
 
 import numpy as np
@@ -95,6 +97,15 @@ def test_combined_model_is_the_mean_of_its_members(tmp_path, body, template):
     stage = Usd.Stage.Open(str(garment))
     version = stage.GetPrimAtPath(frames.mesh).GetAttribute("garment:modelVersion")
     assert version.Get() == "test-ensemble"
+
+
+def test_saved_model_files_get_the_usual_permissions(tmp_path, body, template):
+    """safetensors makes its file 0600; a saved model is readable as any output (umask)."""
+    (path,) = _members(tmp_path, body, template)[:1]
+    umask = os.umask(0)
+    os.umask(umask)
+    for name in ("weights.safetensors", "model.json"):
+        assert stat.S_IMODE((path / name).stat().st_mode) == 0o666 & ~umask, name
 
 
 def test_combine_refuses_mismatched_models(tmp_path, body, template, synthetic_body):
