@@ -23,9 +23,12 @@ from usd_garment.regressor import (
     descriptor_layout,
     motion_descriptor,
 )
+from usd_garment.regressor.pose_code import pose_to_features
 from usd_garment.training.pose import (
+    WEIGHT_FLOOR,
     PoseCodecTrainConfig,
     evaluate_pose_codec,
+    garment_joint_weights,
     train_pose_codec,
 )
 from usd_garment.training.regressor import (
@@ -251,6 +254,68 @@ def test_pose_codec_resume_continues(tmp_path: Path) -> None:
         assert a["train_mse"] == pytest.approx(b["train_mse"], rel=1e-6)
     for key, value in straight.state_dict().items():
         torch.testing.assert_close(resumed.state_dict()[key], value)
+
+
+def test_garment_joint_weights_follow_the_kinematic_tree() -> None:
+    """A garment skinned half to the left knee and half to the spine: the joints whose rotation
+    moves it (knee, hip above it, spine1 above spine2) weigh most, the rest the floor."""
+    skinning = torch.zeros(10, 24)
+    skinning[:5, 4] = 1.0  # left knee
+    skinning[5:, 6] = 1.0  # spine2
+    weights = garment_joint_weights(skinning)  # joints 1..23
+    assert weights.shape == (23,) and weights.mean() == pytest.approx(1.0)
+    # Index j - 1 holds joint j: left hip 0, spine1 2, left knee 3, spine2 5.
+    assert weights.max() == pytest.approx(weights[0])
+    for index in (2, 3, 5):
+        assert weights[index] == pytest.approx(weights[0])
+    floor = weights[[1, 4, 6, 15, 19]]  # right hip, right knee, left ankle, shoulder, wrist
+    torch.testing.assert_close(floor, torch.full((5,), float(weights.min())))
+    assert float(weights.min() / weights.max()) == pytest.approx(WEIGHT_FLOOR)
+
+
+def test_garment_weighting_spends_the_code_on_the_weighted_joints() -> None:
+    """Poses with two factors of motion in the legs and two larger ones elsewhere: a 2-d code
+    holds one pair. The uniform loss keeps the larger, weighting the legs keeps the legs' (their
+    error falls, the rest's rises); a weighting without weights, or an unknown one, is refused."""
+    legs = [1, 2, 4, 5]  # hips and knees
+
+    def poses_of(frames: int, seed: int) -> np.ndarray:
+        rng = np.random.default_rng(seed)
+        t = np.arange(frames)[:, None] / 30.0
+        factors = np.sin(2 * np.pi * np.array([0.7, 1.1, 0.5, 1.3]) * t + rng.uniform(0, 6, 4))
+        directions = np.random.default_rng(0).normal(size=(4, 24, 3))  # fixed by the joints
+        mask = np.zeros((24, 1))
+        mask[legs] = 1.0
+        leg_part = np.einsum("tk,kjc->tjc", 0.3 * factors[:, :2], directions[:2]) * mask
+        rest = np.einsum("tk,kjc->tjc", factors[:, 2:], directions[2:]) * (1 - mask)
+        return leg_part + 0.3 * rest
+
+    weights = torch.full((23,), 0.05)
+    weights[[j - 1 for j in legs]] = 5.0
+    base = dict(hidden=64, code_size=2, epochs=30, batch_size=64, lr=3e-3, seed=3)
+    poses = poses_of(600, 5)
+    uniform, _ = train_pose_codec(poses, PoseCodecTrainConfig(**base))
+    weighted, history = train_pose_codec(
+        poses, PoseCodecTrainConfig(**base, joint_weighting="garment"), joint_weights=weights
+    )
+    assert history["joint_weights"][0] == 5.0
+    held_out = torch.as_tensor(poses_of(200, 6), dtype=torch.float32)
+    features = pose_to_features(held_out).reshape(-1, 23, 9)
+
+    def errors(codec: PoseCodec) -> tuple[float, float]:
+        with torch.no_grad():
+            decoded = codec(held_out).reshape(-1, 23, 9)
+        per_joint = (decoded - features).square().mean((0, 2))
+        chosen = torch.zeros(23, dtype=torch.bool)
+        chosen[[j - 1 for j in legs]] = True
+        return float(per_joint[chosen].mean()), float(per_joint[~chosen].mean())
+
+    (legs_u, rest_u), (legs_w, rest_w) = errors(uniform), errors(weighted)
+    assert legs_w < 0.2 * legs_u and rest_w > 5 * rest_u
+    with pytest.raises(ValueError, match="missing"):
+        train_pose_codec(poses, PoseCodecTrainConfig(**base, joint_weighting="garment"))
+    with pytest.raises(ValueError, match="unknown joint_weighting"):
+        PoseCodecTrainConfig(joint_weighting="arms")
 
 
 N_VERTS = 6

@@ -37,7 +37,11 @@ from usd_garment.methods.learned_model import (
 )
 from usd_garment.regressor.gru import GarmentRegressor
 from usd_garment.regressor.pose_code import PoseCodec
-from usd_garment.training.pose import PoseCodecTrainConfig, train_pose_codec
+from usd_garment.training.pose import (
+    PoseCodecTrainConfig,
+    garment_joint_weights,
+    train_pose_codec,
+)
 from usd_garment.training.regressor import RegressorTrainConfig, train_regressor
 from usd_garment.training.vae import VaeTrainConfig, split_frames, train_vae
 
@@ -186,9 +190,14 @@ def train_stage(
     net: torch.nn.Module
     if stage == "pose":
         config: Any = settings.pose
+        weights = None
+        if config.joint_weighting == "garment":
+            template = torch.as_tensor(data.template, dtype=torch.float32)
+            weights = garment_joint_weights(fields.weights(template))
         net, history = train_pose_codec(
-            _train_poses(data), config, report, checkpoint=checkpoint, resume=resume
-        )
+            _train_poses(data), config, report, checkpoint=checkpoint, resume=resume,
+            joint_weights=weights,
+        )  # fmt: skip
     elif stage == "vae":
         config = settings.vae
         net, history = train_vae(

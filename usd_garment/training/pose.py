@@ -1,6 +1,8 @@
 """Training the pose codec (the learned 10-d pose code of the motion descriptor): an autoencoder
 of SMPL poses fitted by the mean squared error of the 207 pose features (R − I of joints 1..23),
-with per-epoch validation on a held-out share of the poses, checkpoints and resume."""
+each joint's error optionally weighted by how much of the garment it moves
+(:func:`garment_joint_weights`), with per-epoch validation on a held-out share of the poses,
+checkpoints and resume."""
 
 from __future__ import annotations
 
@@ -14,6 +16,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from usd_garment.body.joints import NUM_JOINTS, SMPL_PARENTS
 from usd_garment.regressor.pose_code import PoseCodec, features_to_rotations, pose_to_features
 from usd_garment.training.checkpoint import resume_checkpoint, save_checkpoint
 
@@ -38,6 +41,9 @@ class PoseCodecTrainConfig:
         lr_decay: ... multiplied by this after every epoch.
         validation_fraction: share of the poses held out for validation (none if 0 or if fewer
             than 2 poses).
+        joint_weighting: ``"uniform"`` (every joint's features alike, the paper's) or
+            ``"garment"`` (each joint's squared error weighted by :func:`garment_joint_weights`
+            of the training set's garment: the code spends itself on what moves the garment).
         seed: seed of the initial weights, the split and the shuffles.
         device: torch device of the training.
     """
@@ -49,13 +55,44 @@ class PoseCodecTrainConfig:
     lr: float = 1e-3
     lr_decay: float = 1.0
     validation_fraction: float = 0.1
+    joint_weighting: str = "uniform"
     seed: int = 0
     device: str = "cpu"
+
+    def __post_init__(self) -> None:
+        if self.joint_weighting not in JOINT_WEIGHTINGS:
+            raise ValueError(
+                f"unknown joint_weighting '{self.joint_weighting}' ({', '.join(JOINT_WEIGHTINGS)})"
+            )
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> PoseCodecTrainConfig:
         """The config of ``asdict(config)`` or its JSON (unknown keys raise ``TypeError``)."""
         return cls(**values)
+
+
+#: The values of ``PoseCodecTrainConfig.joint_weighting``.
+JOINT_WEIGHTINGS = ("uniform", "garment")
+#: The weight of a joint that moves none of the garment, against 1 for the one that moves most.
+WEIGHT_FLOOR = 0.1
+
+
+def garment_joint_weights(skinning: torch.Tensor) -> torch.Tensor:
+    """Weights ``(23,)`` of joints 1..23 in the pose codec's loss, from the garment's skinning
+    weights ``(N, 24)`` (rows sum to 1) at its rest vertices.
+
+    A joint's rotation moves every vertex skinned to it or to a joint below it in the tree, so
+    its relevance is the share of the garment's skinning mass on its subtree. The weights are
+    :data:`WEIGHT_FLOOR` + that share scaled to at most 1, then scaled to a mean of 1 (the
+    loss keeps the size of the uniform one): a dress's hips and knees count, a T-shirt's barely.
+    """
+    mass = skinning.to(torch.float64).mean(0)  # (24,)
+    subtree = mass.clone()
+    for joint in range(NUM_JOINTS - 1, 0, -1):  # children come after their parents
+        subtree[SMPL_PARENTS[joint]] += subtree[joint]
+    share = subtree[1:] / subtree[1:].max().clamp(min=1e-12)
+    weights = WEIGHT_FLOOR + (1.0 - WEIGHT_FLOOR) * share
+    return (weights / weights.mean()).to(torch.float32)
 
 
 @torch.no_grad()
@@ -89,12 +126,15 @@ def train_pose_codec(
     progress: EpochProgress | None = None,
     checkpoint: str | Path | None = None,
     resume: bool = False,
+    joint_weights: torch.Tensor | None = None,
 ) -> tuple[PoseCodec, dict[str, Any]]:
     """Fit a :class:`PoseCodec` to poses.
 
     Args:
         poses: ``(M, 24, 3)`` local axis-angle rotations (rad), SMPL order; the root is ignored.
         config: training settings (defaults if None).
+        joint_weights: ``(23,)`` weights of joints 1..23 in the training loss (None: all 1);
+            needed when ``config.joint_weighting`` is ``"garment"``.
         progress: called after every epoch.
         checkpoint: file written after every epoch (``torch.save`` of the model, its config,
             the optimiser, the epoch, the history, the training config and the random state).
@@ -114,6 +154,9 @@ def train_pose_codec(
         ValueError: bad poses, or a checkpoint of another kind or model shape.
     """
     config = config or PoseCodecTrainConfig()
+    if (joint_weights is None) != (config.joint_weighting == "uniform"):
+        raise ValueError(f"joint_weighting '{config.joint_weighting}' with joint_weights "
+                         f"{'missing' if joint_weights is None else 'given'}")  # fmt: skip
     poses = torch.as_tensor(np.asarray(poses), dtype=torch.float32)
     if poses.ndim != 3 or poses.shape[1:] != (24, 3) or poses.shape[0] == 0:
         raise ValueError(f"poses must be (M, 24, 3) with M > 0, got {tuple(poses.shape)}")
@@ -131,12 +174,15 @@ def train_pose_codec(
     n_val = min(n_val, m - 1)
     val_poses = poses[order[:n_val]]
     train_features = pose_to_features(poses[order[n_val:]]).to(device)
+    weights = torch.ones(NUM_JOINTS - 1) if joint_weights is None else joint_weights.float()
+    feature_weights = weights.repeat_interleave(9).to(device)  # (207,): 9 features per joint
 
     history: dict[str, Any] = {
         "config": asdict(config),
         "model": codec.config(),
         "train_poses": int(train_features.shape[0]),
         "validation_poses": int(n_val),
+        "joint_weights": [round(float(w), 4) for w in weights],
         "epochs": [],
     }
     start = 0
@@ -157,7 +203,8 @@ def train_pose_codec(
         total, batches = 0.0, 0
         for idx in perm.split(config.batch_size):
             features = train_features[idx]
-            loss = (codec.decode(codec.encode_features(features)) - features).square().mean()
+            error = codec.decode(codec.encode_features(features)) - features
+            loss = (error.square() * feature_weights).mean()
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             optimizer.step()
