@@ -212,15 +212,15 @@ def test_shipped_model_is_the_default(
 @pytest.mark.parametrize("garment", ["tshirt", "dress"])
 def test_the_shipped_members_were_trained_with_the_committed_settings(garment: str) -> None:
     """Each member of a shipped ensemble records the settings of its
-    ``examples/train/tshirt_memberN.json`` (seed, GRU width, VAE epochs; defaults elsewhere):
-    the dress's members were trained with the T-shirt's settings files."""
+    ``examples/train/{garment}_memberN.json`` (seed, GRU width, VAE epochs, the dress's pose
+    code weighted by the garment; defaults elsewhere)."""
     from usd_garment.methods.learned import shipped_model
     from usd_garment.training.pipeline import TrainSettings
 
     folder = shipped_model(garment)
     assert folder is not None
     examples = Path(__file__).parent.parent / "examples" / "train"
-    configs = sorted(examples.glob("tshirt_member*"))
+    configs = sorted(examples.glob(f"{garment}_member*"))
     members = load_learned_model(folder).members
     assert len(configs) == len(members) == 3
     for member, path in zip(members, configs, strict=True):
