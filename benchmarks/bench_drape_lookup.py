@@ -21,8 +21,9 @@ import numpy as np
 import torch
 from scipy.spatial import cKDTree
 
-from usd_garment.canonical.dataset import load_canonical_set
+from usd_garment.canonical.dataset import CanonicalSet, load_canonical_set
 from usd_garment.training.pipeline import load_stage
+from usd_garment.training.vae import split_frames
 
 #: SMPL joints of the raw-rotation features: hips, knees and spine; all but the hands.
 JOINT_SETS = {"hips, knees, spine": [1, 2, 3, 4, 5, 6, 9], "joints 1-21": list(range(1, 22))}
@@ -30,25 +31,18 @@ JOINT_SETS = {"hips, knees, spine": [1, 2, 3, 4, 5, 6, 9], "joints 1-21": list(r
 BETA_WEIGHT = 0.3
 
 
-def lookup_errors(
-    canonical: np.ndarray, offsets: np.ndarray, splits: np.ndarray, features: np.ndarray, k: int
-) -> list[tuple[int, float]]:
-    """Per held-out sequence (index, mean vertex error in mm) of the k-NN lookup.
-
-    Args:
-        canonical: ``(M, N, 3)`` canonical garments (m); offsets ``(S + 1,)`` their sequences.
-        splits: ``(S,)`` each sequence's split; features: ``(M, D)`` per frame.
-    """
-    sequence = np.repeat(np.arange(len(splits)), np.diff(offsets))
-    train = np.isin(sequence, np.flatnonzero(splits == "train"))
+def lookup_errors(data: CanonicalSet, features: np.ndarray, k: int) -> list[tuple[int, float]]:
+    """Per validation and test sequence of ``data``, (index, mean vertex error in mm) of the k-NN
+    lookup over its training frames in ``features`` ``(M, D)`` (one row per frame)."""
+    train = split_frames(data, "train")
     tree = cKDTree(features[train])
+    targets = np.asarray(data.canonical)[train]  # (M_train, N, 3), m
     out = []
-    for index in np.flatnonzero(splits != "train"):
-        frames = np.arange(offsets[index], offsets[index + 1])
+    for index in data.split_sequences("validation") + data.split_sequences("test"):
+        frames = data.sequence(index)
         _, nearest = tree.query(features[frames], k=k)
-        predicted = canonical[train][nearest].mean(axis=1)
-        error = np.linalg.norm(canonical[frames] - predicted, axis=-1).mean()
-        out.append((int(index), 1e3 * float(error)))
+        error = np.linalg.norm(data.canonical[frames] - targets[nearest].mean(axis=1), axis=-1)
+        out.append((index, 1e3 * float(error.mean())))
     return out
 
 
@@ -71,10 +65,7 @@ def main() -> None:
         features[f"pose code of {run}"] = code / code.std(axis=0).mean() * spread
     names = ["_".join(str(s).rsplit("/", 1)[-1].split("_")[:2]) for s in data.sources]
     for label, values in features.items():
-        rows = lookup_errors(
-            data.canonical, data.frame_offsets, np.asarray(data.splits),
-            np.concatenate([values, betas], axis=1), args.k,
-        )  # fmt: skip
+        rows = lookup_errors(data, np.concatenate([values, betas], axis=1), args.k)
         frames = np.diff(data.frame_offsets)[[i for i, _ in rows]]
         mean = np.average([e for _, e in rows], weights=frames)
         print(f"{label}: all {mean:.1f} mm | " + " | ".join(f"{names[i]} {e:.1f}" for i, e in rows))
