@@ -285,6 +285,12 @@ def _member_name(name: str, index: int) -> str:
     return f"{stem}_member{index}.{suffix}"
 
 
+def _member_count(path: Path) -> int:
+    """How many members the model directory ``path`` holds, from its ``model.json`` alone."""
+    config = json.loads((path / CONFIG_NAME).read_text(encoding="utf-8"))
+    return 1 if config["format"] == 1 else len(config["members"])
+
+
 def copy_member_records(paths: list[str | Path], out: str | Path) -> int:
     """Copy the training curves and logs of the members of the models ``paths`` into the combined
     model directory ``out`` (existing), numbered as :func:`combine_models` numbers the members:
@@ -295,7 +301,7 @@ def copy_member_records(paths: list[str | Path], out: str | Path) -> int:
     """
     copied, index = 0, 0
     for path in map(Path, paths):
-        count = len(load_learned_model(path).members)
+        count = _member_count(path)
         for member in range(count):
             for name in (CURVES_NAME, LOG_NAME):
                 sources = [path / _member_name(name, member)]
