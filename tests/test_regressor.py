@@ -25,7 +25,6 @@ from usd_garment.regressor import (
 )
 from usd_garment.regressor.pose_code import pose_to_features
 from usd_garment.training.pose import (
-    WEIGHT_FLOOR,
     PoseCodecTrainConfig,
     evaluate_pose_codec,
     garment_joint_weights,
@@ -270,7 +269,11 @@ def test_garment_joint_weights_follow_the_kinematic_tree() -> None:
         assert weights[index] == pytest.approx(weights[0])
     floor = weights[[1, 4, 6, 15, 19]]  # right hip, right knee, left ankle, shoulder, wrist
     torch.testing.assert_close(floor, torch.full((5,), float(weights.min())))
-    assert float(weights.min() / weights.max()) == pytest.approx(WEIGHT_FLOOR)
+    assert float(weights.min() / weights.max()) == pytest.approx(0.1)  # the default floor
+    # Floor 0 leaves the joints that move none of the garment out of the loss.
+    unfloored = garment_joint_weights(skinning, floor=0.0)
+    assert unfloored.mean() == pytest.approx(1.0)
+    torch.testing.assert_close(unfloored.nonzero().flatten(), torch.tensor([0, 2, 3, 5]))
 
 
 def test_garment_weighting_spends_the_code_on_the_weighted_joints() -> None:
@@ -316,6 +319,8 @@ def test_garment_weighting_spends_the_code_on_the_weighted_joints() -> None:
         train_pose_codec(poses, PoseCodecTrainConfig(**base, joint_weighting="garment"))
     with pytest.raises(ValueError, match="unknown joint_weighting"):
         PoseCodecTrainConfig(joint_weighting="arms")
+    with pytest.raises(ValueError, match="joint_weight_floor"):
+        PoseCodecTrainConfig(joint_weighting="garment", joint_weight_floor=-0.1)
 
 
 N_VERTS = 6

@@ -193,7 +193,7 @@ def train_stage(
         weights = None
         if config.joint_weighting == "garment":
             template = torch.as_tensor(data.template, dtype=torch.float32)
-            weights = garment_joint_weights(fields.weights(template))
+            weights = garment_joint_weights(fields.weights(template), config.joint_weight_floor)
         net, history = train_pose_codec(
             _train_poses(data), config, report, checkpoint=checkpoint, resume=resume,
             joint_weights=weights,

@@ -44,6 +44,9 @@ class PoseCodecTrainConfig:
         joint_weighting: ``"uniform"`` (every joint's features alike, the paper's) or
             ``"garment"`` (each joint's squared error weighted by :func:`garment_joint_weights`
             of the training set's garment: the code spends itself on what moves the garment).
+        joint_weight_floor: with ``"garment"``, the weight of a joint that moves none of the
+            garment against 1 for the one that moves most (0: such joints are left out of the
+            loss). Records written before this setting read back as 0.1, the floor they used.
         seed: seed of the initial weights, the split and the shuffles.
         device: torch device of the training.
     """
@@ -56,6 +59,7 @@ class PoseCodecTrainConfig:
     lr_decay: float = 1.0
     validation_fraction: float = 0.1
     joint_weighting: str = "uniform"
+    joint_weight_floor: float = 0.1
     seed: int = 0
     device: str = "cpu"
 
@@ -64,6 +68,8 @@ class PoseCodecTrainConfig:
             raise ValueError(
                 f"unknown joint_weighting '{self.joint_weighting}' ({', '.join(JOINT_WEIGHTINGS)})"
             )
+        if not 0.0 <= self.joint_weight_floor <= 1.0:
+            raise ValueError(f"joint_weight_floor must be in [0, 1], got {self.joint_weight_floor}")
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> PoseCodecTrainConfig:
@@ -73,17 +79,15 @@ class PoseCodecTrainConfig:
 
 #: The values of ``PoseCodecTrainConfig.joint_weighting``.
 JOINT_WEIGHTINGS = ("uniform", "garment")
-#: The weight of a joint that moves none of the garment, against 1 for the one that moves most.
-WEIGHT_FLOOR = 0.1
 
 
-def garment_joint_weights(skinning: torch.Tensor) -> torch.Tensor:
+def garment_joint_weights(skinning: torch.Tensor, floor: float = 0.1) -> torch.Tensor:
     """Weights ``(23,)`` of joints 1..23 in the pose codec's loss, from the garment's skinning
     weights ``(N, 24)`` (rows sum to 1) at its rest vertices.
 
     A joint's rotation moves every vertex skinned to it or to a joint below it in the tree, so
     its relevance is the share of the garment's skinning mass on its subtree. The weights are
-    :data:`WEIGHT_FLOOR` + that share scaled to at most 1, then scaled to a mean of 1 (the
+    ``floor`` + (1 − ``floor``) × that share scaled to at most 1, then scaled to a mean of 1 (the
     loss keeps the size of the uniform one): a dress's hips and knees count, a T-shirt's barely.
     """
     mass = skinning.to(torch.float64).mean(0)  # (24,)
@@ -91,7 +95,7 @@ def garment_joint_weights(skinning: torch.Tensor) -> torch.Tensor:
     for joint in range(NUM_JOINTS - 1, 0, -1):  # children come after their parents
         subtree[SMPL_PARENTS[joint]] += subtree[joint]
     share = subtree[1:] / subtree[1:].max().clamp(min=1e-12)
-    weights = WEIGHT_FLOOR + (1.0 - WEIGHT_FLOOR) * share
+    weights = floor + (1.0 - floor) * share
     return (weights / weights.mean()).to(torch.float32)
 
 
