@@ -65,10 +65,15 @@ def main() -> None:
         features[f"pose code of {run}"] = code / code.std(axis=0).mean() * spread
     names = ["_".join(str(s).rsplit("/", 1)[-1].split("_")[:2]) for s in data.sources]
     for label, values in features.items():
-        rows = lookup_errors(data, np.concatenate([values, betas], axis=1), args.k)
-        frames = np.diff(data.frame_offsets)[[i for i, _ in rows]]
-        mean = np.average([e for _, e in rows], weights=frames)
-        print(f"{label}: all {mean:.1f} mm | " + " | ".join(f"{names[i]} {e:.1f}" for i, e in rows))
+        rows = dict(lookup_errors(data, np.concatenate([values, betas], axis=1), args.k))
+        means = []
+        for split in ("validation", "test"):
+            indices = data.split_sequences(split)
+            frames = np.diff(data.frame_offsets)[indices]
+            mean = np.average([rows[i] for i in indices], weights=frames)
+            means.append(f"{split} {mean:.2f} mm")
+        details = " | ".join(f"{names[i]} {e:.1f}" for i, e in rows.items())
+        print(f"{label}: {', '.join(means)} | {details}")
 
 
 if __name__ == "__main__":
