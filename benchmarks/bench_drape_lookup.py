@@ -5,9 +5,9 @@ pose code), each with 0.3 × β₁..β₄. Its error (mm, mean vertex distance i
 per held-out sequence says which features carry what the garment depends on; compare it with
 the networks' error of ``usd-garment dataset floor --model``.
 
-Stop 30 on the dress: 22.5 mm on the hips, knees and spine (3–4 mm on the slow arm raises)
-against 28.9 mm on member 0's 10-d pose code (27.0 weighted by the garment) and 29.6 mm on all
-joints.
+On the dress, validation / test: 22.3 / 22.6 mm on the hips, knees and spine (3–4 mm on the slow
+arm raises), 30.5 / 28.7 mm on all joints; on member 0's 10-d pose code 27.4 / 30.3 mm uniform,
+26.8 / 27.2 weighted by the garment with floor 0.1 (stop 30), 25.8 / 27.0 with floor 0 (stop 31).
 
 Run: ``python benchmarks/bench_drape_lookup.py scratch/canonical_dress_v4.npz
 [--run scratch/runs/dress_v4_m0 ...] [--k 5]``
