@@ -224,3 +224,36 @@ def combine(models: tuple[Path, ...], out: Path, version: str | None) -> None:  
         save_learned_model(out, model)
         records = copy_member_records(list(models), out)
     click.echo(f"wrote the model {out}: {len(model.members)} members, {records} curves and logs")
+
+
+@train.command("member", short_help="Write one member of an ensemble as a model of its own.")
+@click.argument("model", type=click.Path(file_okay=False, path_type=Path))
+@click.option("--index", type=int, required=True, help="The member's number (0-based).")
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    required=True,
+    help="Model directory to write; created, and not MODEL.",
+)
+def member(model: Path, index: int, out: Path) -> None:
+    """Member INDEX of the ensemble MODEL as a one-member model, to dress or bench it alone
+    (e.g. `bench --model m0=DIR`): its networks and training record, version
+    '{version}-member{index}'; its training curves and log are copied as curves.png and
+    train.log."""
+    with user_errors():
+        from usd_garment.methods.learned_model import (
+            copy_member_record,
+            load_learned_model,
+            member_model,
+            save_learned_model,
+        )
+
+        if out.resolve() == model.resolve():
+            raise click.BadParameter(f"{out} is the model itself", param_hint="--out")
+        one = member_model(load_learned_model(model), index)
+        one.info["command"] = "usd-garment " + shlex.join(
+            ["train", "member", str(model), "--index", str(index), "--out", str(out)]
+        )
+        save_learned_model(out, one)
+        records = copy_member_record(model, index, out)
+    click.echo(f"wrote the model {out}: member {index} of {model}, {records} curves and logs")

@@ -99,6 +99,34 @@ def test_combined_model_is_the_mean_of_its_members(tmp_path, body, template):
     assert version.Get() == "test-ensemble"
 
 
+def test_a_member_of_an_ensemble_is_written_as_a_model_of_its_own(tmp_path, body, template):
+    first, second = _members(tmp_path, body, template)
+    (second / "curves.png").write_bytes(b"curves of seed1")
+    ensemble = tmp_path / "ensemble"
+    assert _run(["train", "combine", first, second, "--out", ensemble])[0] == 0
+    out = tmp_path / "member1"
+    code, output = _run(["train", "member", ensemble, "--index", "1", "--out", out])
+    assert code == 0 and "member 1" in output and "1 curves and logs" in output, output
+    assert (out / "curves.png").read_bytes() == b"curves of seed1"
+    alone, original = load_learned_model(out, body), load_learned_model(second)
+    assert alone.version == "test-ensemble-member1" and len(alone.members) == 1
+    assert alone.members[0].info["source"] == str(second)
+    assert json.loads((out / "model.json").read_text())["command"].startswith(
+        "usd-garment train member"
+    )
+    motion = make_motion("walk", 8, 30.0, seed=1, body=body)
+    z = predict_latents(alone, motion)
+    torch.testing.assert_close(z, predict_latents(original, motion))
+    with torch.no_grad():
+        torch.testing.assert_close(alone.decode(z), original.decode(z))
+
+    code, output = _run(["train", "member", ensemble, "--index", "2", "--out", tmp_path / "x"])
+    assert code == 1 and "no member 2: the model has 2 (0 to 1)" in output, output
+    assert not (tmp_path / "x").exists()
+    code, output = _run(["train", "member", ensemble, "--index", "0", "--out", ensemble])
+    assert code == 2 and "is the model itself" in output, output
+
+
 def test_saved_model_files_get_the_usual_permissions(tmp_path, body, template):
     """safetensors makes its file 0600; a saved model is readable as any output (umask)."""
     (path,) = _members(tmp_path, body, template)[:1]

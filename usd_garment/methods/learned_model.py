@@ -285,31 +285,70 @@ def _member_name(name: str, index: int) -> str:
     return f"{stem}_member{index}.{suffix}"
 
 
+def member_model(model: LearnedModel, index: int) -> LearnedModel:
+    """The one-member model of ``model``'s member ``index`` (0-based), to run or bench it alone:
+    its networks and record, ``model``'s garment and body, version ``{version}-member{index}``,
+    its own ``info`` empty (the caller records how it was made).
+
+    Raises:
+        ModelError: no such member.
+    """
+    count = len(model.members)
+    if not 0 <= index < count:
+        raise ModelError(f"no member {index}: the model has {count} (0 to {count - 1})")
+    version = f"{model.version}-member{index}"
+    return replace(model, members=[model.members[index]], version=version, info={})
+
+
 def _member_count(path: Path) -> int:
     """How many members the model directory ``path`` holds, from its ``model.json`` alone."""
     config = json.loads((path / CONFIG_NAME).read_text(encoding="utf-8"))
     return 1 if config["format"] == 1 else len(config["members"])
 
 
+def _member_record(path: Path, name: str, member: int, count: int) -> Path | None:
+    """The file ``name`` (:data:`CURVES_NAME` or :data:`LOG_NAME`) of member ``member`` of the
+    model directory ``path`` of ``count`` members, if there is one: ``curves_member{i}.png``, or
+    for a one-member model (a ``train all`` run) ``curves.png``."""
+    sources = [path / _member_name(name, member)] + ([path / name] if count == 1 else [])
+    return next((source for source in sources if source.is_file()), None)
+
+
+def _copy(source: Path, target: Path) -> None:
+    """Copy ``source`` to ``target`` through a temporary file renamed."""
+    with atomic_output(target) as tmp:
+        tmp.write_bytes(source.read_bytes())
+
+
 def copy_member_records(paths: list[str | Path], out: str | Path) -> int:
     """Copy the training curves and logs of the members of the models ``paths`` into the combined
     model directory ``out`` (existing), numbered as :func:`combine_models` numbers the members:
-    ``curves_member{i}.png`` and ``train_member{i}.log``, each written to a temporary file and
-    renamed. A one-member model keeps them as ``curves.png`` and ``train.log`` (a ``train all``
-    run), an ensemble under the numbered names. Returns how many files were copied (a member
-    without them is skipped).
+    ``curves_member{i}.png`` and ``train_member{i}.log``. Returns how many files were copied (a
+    member without them is skipped).
     """
     copied, index = 0, 0
     for path in map(Path, paths):
         count = _member_count(path)
         for member in range(count):
             for name in (CURVES_NAME, LOG_NAME):
-                sources = [path / _member_name(name, member)]
-                sources += [path / name] if count == 1 else []
-                source = next((s for s in sources if s.is_file()), None)
+                source = _member_record(path, name, member, count)
                 if source is not None:
-                    with atomic_output(Path(out) / _member_name(name, index)) as tmp:
-                        tmp.write_bytes(source.read_bytes())
+                    _copy(source, Path(out) / _member_name(name, index))
                     copied += 1
             index += 1
+    return copied
+
+
+def copy_member_record(path: str | Path, index: int, out: str | Path) -> int:
+    """Copy the training curves and log of member ``index`` of the model ``path`` into the
+    one-member model directory ``out`` (existing) as ``curves.png`` and ``train.log``, the names
+    of a ``train all`` run. Returns how many files were copied."""
+    path = Path(path)
+    count = _member_count(path)
+    copied = 0
+    for name in (CURVES_NAME, LOG_NAME):
+        source = _member_record(path, name, index, count)
+        if source is not None:
+            _copy(source, Path(out) / name)
+            copied += 1
     return copied
