@@ -306,18 +306,23 @@ def _member_count(path: Path) -> int:
     return 1 if config["format"] == 1 else len(config["members"])
 
 
-def _member_record(path: Path, name: str, member: int, count: int) -> Path | None:
-    """The file ``name`` (:data:`CURVES_NAME` or :data:`LOG_NAME`) of member ``member`` of the
-    model directory ``path`` of ``count`` members, if there is one: ``curves_member{i}.png``, or
-    for a one-member model (a ``train all`` run) ``curves.png``."""
-    sources = [path / _member_name(name, member)] + ([path / name] if count == 1 else [])
-    return next((source for source in sources if source.is_file()), None)
-
-
-def _copy(source: Path, target: Path) -> None:
-    """Copy ``source`` to ``target`` through a temporary file renamed."""
-    with atomic_output(target) as tmp:
-        tmp.write_bytes(source.read_bytes())
+def _copy_member_files(path: Path, member: int, count: int, out: Path, index: int | None) -> int:
+    """Copy the training curves and log of member ``member`` of the model directory ``path`` (of
+    ``count`` members) into ``out``, each through a temporary file renamed: as
+    ``curves_member{index}.png`` and ``train_member{index}.log``, or with ``index`` None as a
+    ``train all`` run's ``curves.png`` and ``train.log``. A member's files are its numbered ones,
+    or for a one-member model (a ``train all`` run) the plain names. Returns how many were
+    copied (a missing file is skipped)."""
+    copied = 0
+    for name in (CURVES_NAME, LOG_NAME):
+        sources = [path / _member_name(name, member)] + ([path / name] if count == 1 else [])
+        source = next((s for s in sources if s.is_file()), None)
+        if source is not None:
+            target = out / (name if index is None else _member_name(name, index))
+            with atomic_output(target) as tmp:
+                tmp.write_bytes(source.read_bytes())
+            copied += 1
+    return copied
 
 
 def copy_member_records(paths: list[str | Path], out: str | Path) -> int:
@@ -330,11 +335,7 @@ def copy_member_records(paths: list[str | Path], out: str | Path) -> int:
     for path in map(Path, paths):
         count = _member_count(path)
         for member in range(count):
-            for name in (CURVES_NAME, LOG_NAME):
-                source = _member_record(path, name, member, count)
-                if source is not None:
-                    _copy(source, Path(out) / _member_name(name, index))
-                    copied += 1
+            copied += _copy_member_files(path, member, count, Path(out), index)
             index += 1
     return copied
 
@@ -344,11 +345,4 @@ def copy_member_record(path: str | Path, index: int, out: str | Path) -> int:
     one-member model directory ``out`` (existing) as ``curves.png`` and ``train.log``, the names
     of a ``train all`` run. Returns how many files were copied."""
     path = Path(path)
-    count = _member_count(path)
-    copied = 0
-    for name in (CURVES_NAME, LOG_NAME):
-        source = _member_record(path, name, index, count)
-        if source is not None:
-            _copy(source, Path(out) / name)
-            copied += 1
-    return copied
+    return _copy_member_files(path, index, _member_count(path), Path(out), None)

@@ -28,6 +28,11 @@ CHECKPOINT_FORMAT = "usd_garment.pose_codec_checkpoint"
 _EVAL_CHUNK = 4096
 
 
+#: The default weight of a joint that moves none of the garment, against 1 for the one that
+#: moves most (``PoseCodecTrainConfig.joint_weight_floor``).
+WEIGHT_FLOOR = 0.1
+
+
 @dataclass
 class PoseCodecTrainConfig:
     """Settings of a pose codec training.
@@ -59,7 +64,7 @@ class PoseCodecTrainConfig:
     lr_decay: float = 1.0
     validation_fraction: float = 0.1
     joint_weighting: str = "uniform"
-    joint_weight_floor: float = 0.1
+    joint_weight_floor: float = WEIGHT_FLOOR
     seed: int = 0
     device: str = "cpu"
 
@@ -81,7 +86,7 @@ class PoseCodecTrainConfig:
 JOINT_WEIGHTINGS = ("uniform", "garment")
 
 
-def garment_joint_weights(skinning: torch.Tensor, floor: float = 0.1) -> torch.Tensor:
+def garment_joint_weights(skinning: torch.Tensor, floor: float = WEIGHT_FLOOR) -> torch.Tensor:
     """Weights ``(23,)`` of joints 1..23 in the pose codec's loss, from the garment's skinning
     weights ``(N, 24)`` (rows sum to 1) at its rest vertices.
 
