@@ -259,7 +259,9 @@ class GarmentVAE(nn.Module):
 
         Args:
             x: garments ``(B, N, 3)`` (m).
-            generator: random source of ε (on the model's device); None: torch's default.
+            generator: CPU random source of ε (drawn on the CPU and moved to the model's
+                device, so that a seed gives the same draws on every device); None: torch's
+                default CPU generator.
 
         Returns:
             reconstruction ``(B, N, 3)`` (m), μ ``(B, L)``, log σ² ``(B, L)``.
@@ -267,7 +269,7 @@ class GarmentVAE(nn.Module):
         mu, logvar = self.encode(x)
         z = mu
         if self.training:
-            eps = torch.randn(mu.shape, generator=generator, device=mu.device, dtype=mu.dtype)
+            eps = torch.randn(mu.shape, generator=generator, dtype=mu.dtype).to(mu.device)
             z = mu + eps * (0.5 * logvar).exp()
         return self.decode(z), mu, logvar
 

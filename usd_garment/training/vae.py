@@ -299,7 +299,8 @@ def train_vae(
     train_x = train_x.to(device)
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr)
     order_gen = torch.Generator().manual_seed(config.seed)
-    noise_gen = torch.Generator(device=device).manual_seed(config.seed + 1)
+    # on the CPU for every device: a seed draws the same noise on a GPU as on the CPU
+    noise_gen = torch.Generator().manual_seed(config.seed + 1)
     latents = _random_latents(config)
     history: dict[str, Any] = {
         "config": config.to_dict(),
@@ -349,9 +350,8 @@ def train_vae(
             if config.collision:
                 loss = loss + config.lambda_collision * terms["collision_rec"]
             z = torch.randn(
-                config.self_supervised_batch, config.latent_size, generator=noise_gen,
-                device=device,
-            )  # fmt: skip
+                config.self_supervised_batch, config.latent_size, generator=noise_gen
+            ).to(device)
             if config.uses_self_supervision:
                 terms["collision_random"] = collision_loss(model.decode(z), sdf, config.epsilon)
                 loss = loss + config.lambda_collision * terms["collision_random"]
