@@ -456,3 +456,24 @@ def test_regressor_needs_train_sequences() -> None:
     data = synthetic_set(lengths=(30, 30), splits=["validation", "test"])
     with pytest.raises(ValueError):
         train_regressor(data, _encode, _codec(), _small_config())
+
+
+def test_regressor_regularisation_settings() -> None:
+    """Weight decay shrinks the weights and input noise changes the fit, both repeatably; at 0
+    they leave the training as it was; negative values are refused."""
+    data = synthetic_set(lengths=(40, 35, 30), splits=["train", "train", "validation"])
+    small = {"hidden": (16,), "epochs": 3, "crops_per_epoch": 8}
+
+    def weights(**changes) -> torch.Tensor:
+        model, _ = train_regressor(data, _encode, _codec(), _small_config(**small, **changes))
+        return torch.cat([p.detach().flatten() for p in model.parameters()])
+
+    plain = weights()
+    torch.testing.assert_close(weights(weight_decay=0.0, input_noise=0.0), plain)
+    assert weights(weight_decay=50.0).norm() < 0.9 * plain.norm()  # 0.85 per step
+    noisy = weights(input_noise=0.3)
+    assert not torch.allclose(noisy, plain)
+    torch.testing.assert_close(weights(input_noise=0.3), noisy)
+    for bad in ({"weight_decay": -1.0}, {"input_noise": -0.1}):
+        with pytest.raises(ValueError, match="must not be negative"):
+            train_regressor(data, _encode, _codec(), _small_config(**small, **bad))

@@ -51,6 +51,9 @@ class RegressorTrainConfig:
         rho2: weight ρ2 of L_acc (L1 of per-frame second differences of z).
         grad_clip: largest gradient norm (None: no clipping).
         padding: first frames' derivatives in γ (``"repeat"`` or ``"zeros"``).
+        weight_decay: decoupled weight decay of Adam (AdamW's; 0: none), per unit learning rate.
+        input_noise: deviation of Gaussian noise added to each training crop's γ, in units of
+            each entry's deviation over the training frames (0: none).
         encode_batch: frames per call of ``encode_latent`` and ``decode``.
         seed: seed of the initial weights and of the crops.
         device: torch device of the training (``encode_latent``/``decode`` get tensors there).
@@ -67,6 +70,8 @@ class RegressorTrainConfig:
     rho2: float = 1.0
     grad_clip: float | None = 1.0
     padding: str = "repeat"
+    weight_decay: float = 0.0
+    input_noise: float = 0.0
     encode_batch: int = 256
     seed: int = 0
     device: str = "cpu"
@@ -306,6 +311,8 @@ def train_regressor(
     config = config or RegressorTrainConfig()
     if config.crop_length < 3 or config.batch_size < 1:
         raise ValueError("crop_length must be at least 3 and batch_size at least 1")
+    if config.weight_decay < 0 or config.input_noise < 0:
+        raise ValueError("weight_decay and input_noise must not be negative")
     train_ids = data.split_sequences("train")
     if not train_ids:
         raise ValueError("the canonical set has no 'train' sequences")
@@ -326,7 +333,11 @@ def train_regressor(
         )
     model.to(device)
     model.set_normalization(*_normalization(train))
-    optimizer = torch.optim.Adam(model.parameters(), lr=config.lr)
+    optimizer = torch.optim.Adam(
+        model.parameters(), lr=config.lr, weight_decay=config.weight_decay,
+        decoupled_weight_decay=True,
+    )  # fmt: skip
+    gamma_std = model.input_std[: descriptor_size(codec.code_size)]
 
     lengths = [q.num_frames for q in train]
     total_frames = sum(lengths)
@@ -372,6 +383,9 @@ def train_regressor(
                 for s, ui in zip(seqs, u, strict=True)
             ]
             gamma, betas, target, mask = _batch(train, picks, length)
+            if config.input_noise > 0:
+                noise = torch.randn(gamma.shape, generator=generator).to(device)
+                gamma = gamma + config.input_noise * gamma_std * noise
             pred, _ = model(gamma, betas)
             pos, vel, acc = latent_losses(pred, target, mask)
             loss = pos + config.rho1 * vel + config.rho2 * acc
