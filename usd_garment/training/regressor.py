@@ -371,7 +371,8 @@ def train_regressor(
         tic = time.perf_counter()
         lr = config.lr * config.lr_decay**epoch
         for group in optimizer.param_groups:
-            group["lr"] = lr
+            # a resumed optimizer's groups carry the checkpoint's values: this run's settings win
+            group.update(lr=lr, weight_decay=config.weight_decay, decoupled_weight_decay=True)
         model.train()
         sums = np.zeros(4)
         for step in range(steps):
