@@ -26,6 +26,7 @@ from bench_decoder import synthetic_set
 
 from usd_garment.fields.body_fields import load_body_fields
 from usd_garment.training.pipeline import STAGES, TrainSettings, train_stage
+from usd_garment.training.vae import split_frames
 
 CONFIG = Path(__file__).resolve().parents[1] / "examples" / "train" / "tshirt_member0.json"
 
@@ -52,7 +53,7 @@ def main() -> None:
     fields = load_body_fields()
     t0 = time.perf_counter()
     data = synthetic_set(fields, args.sequences, args.frames)
-    train = args.frames * (args.sequences - 2)
+    train = len(split_frames(data, "train"))
     print(f"synthetic set: {args.sequences} sequences x {args.frames} frames "
           f"({train} train), made in {time.perf_counter() - t0:.1f} s; "
           f"torch {torch.__version__}, {torch.get_num_threads()} CPU threads"

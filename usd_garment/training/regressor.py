@@ -333,10 +333,7 @@ def train_regressor(
         )
     model.to(device)
     model.set_normalization(*_normalization(train))
-    optimizer = torch.optim.Adam(
-        model.parameters(), lr=config.lr, weight_decay=config.weight_decay,
-        decoupled_weight_decay=True,
-    )  # fmt: skip
+    optimizer = torch.optim.Adam(model.parameters(), lr=config.lr)
     gamma_std = model.input_std[: descriptor_size(codec.code_size)]
 
     lengths = [q.num_frames for q in train]
@@ -371,7 +368,8 @@ def train_regressor(
         tic = time.perf_counter()
         lr = config.lr * config.lr_decay**epoch
         for group in optimizer.param_groups:
-            # a resumed optimizer's groups carry the checkpoint's values: this run's settings win
+            # set every epoch, before any step: a resumed optimizer's groups would otherwise
+            # carry the checkpoint's values
             group.update(lr=lr, weight_decay=config.weight_decay, decoupled_weight_decay=True)
         model.train()
         sums = np.zeros(4)
