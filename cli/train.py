@@ -202,12 +202,24 @@ def compare(runs: tuple[Path, ...], output: Path) -> None:
     default=None,
     help="The combined model's version (default: the first model's, with '-ensemble').",
 )
-def combine(models: tuple[Path, ...], out: Path, version: str | None) -> None:  # fmt: skip
+@click.option(
+    "--latent-smoothing",
+    type=click.FloatRange(min=0.0),
+    default=0.0,
+    show_default=True,
+    metavar="SECONDS",
+    help="Standard deviation of a Gaussian that smooths the latent codes in time before "
+    "decoding (0: none).",
+)
+def combine(
+    models: tuple[Path, ...], out: Path, version: str | None, latent_smoothing: float
+) -> None:
     """One model whose garment is the mean of the canonical garments of MODELS (trained on the
     same garment and body, e.g. with other seeds): each model's networks run, their decodings
     are averaged and posed once. Each member keeps its own training command and figures; its
     training curves and log are copied beside the model (curves_member{i}.png,
-    train_member{i}.log)."""
+    train_member{i}.log). With --latent-smoothing the codes are smoothed in time first (the
+    shipped dress: 0.1 s, docs/learning.md)."""
     with user_errors():
         from usd_garment.methods.learned_model import (
             combine_models,
@@ -217,10 +229,11 @@ def combine(models: tuple[Path, ...], out: Path, version: str | None) -> None:  
 
         if any(out.resolve() == path.resolve() for path in models):
             raise click.BadParameter(f"{out} is one of the models combined", param_hint="--out")
-        model = combine_models(list(models), version)
+        model = combine_models(list(models), version, latent_smoothing)
         model.info["command"] = "usd-garment " + shlex.join(
-            ["train", "combine", *map(str, models), "--out", str(out), "--version", model.version]
-        )
+            ["train", "combine", *map(str, models), "--out", str(out), "--version", model.version,
+             "--latent-smoothing", str(latent_smoothing)]
+        )  # fmt: skip
         save_learned_model(out, model)
         records = copy_member_records(list(models), out)
     click.echo(f"wrote the model {out}: {len(model.members)} members, {records} curves and logs")

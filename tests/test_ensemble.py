@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import os
 import stat
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,7 @@ import torch
 from click.testing import CliRunner
 from pxr import Usd
 from safetensors.torch import load_file, save_file
+from scipy.ndimage import gaussian_filter1d
 
 from tests.models import untrained_model
 from usd_garment.body.io import load_body_model
@@ -24,7 +26,7 @@ from usd_garment.cli.main import main
 from usd_garment.garment.library import load_template
 from usd_garment.garment.template import GarmentTemplate
 from usd_garment.methods.learned import predict_latents
-from usd_garment.methods.learned_model import load_learned_model, save_learned_model
+from usd_garment.methods.learned_model import ModelError, load_learned_model, save_learned_model
 from usd_garment.motion.procedural import make_motion
 from usd_garment.usd.body_layer import write_body_layer
 from usd_garment.usd.garment_read import read_garment_layer
@@ -125,6 +127,36 @@ def test_a_member_of_an_ensemble_is_written_as_a_model_of_its_own(tmp_path, body
     assert not (tmp_path / "x").exists()
     code, output = _run(["train", "member", ensemble, "--index", "0", "--out", ensemble])
     assert code == 2 and "is the model itself" in output, output
+
+
+def test_latent_smoothing_is_a_gaussian_over_the_codes_at_30_fps(tmp_path, body, template):
+    first, second = _members(tmp_path, body, template)
+    out = tmp_path / "smoothed"
+    code, output = _run(["train", "combine", first, second, "--out", out,
+                         "--latent-smoothing", "0.1"])  # fmt: skip
+    assert code == 0, output
+    info = json.loads((out / "model.json").read_text())
+    assert info["latent_smoothing_s"] == 0.1 and "--latent-smoothing 0.1" in info["command"]
+    smoothed = load_learned_model(out, body)
+    plain = replace(smoothed, latent_smoothing=0.0)
+    assert smoothed.latent_smoothing == 0.1
+    motion = make_motion("walk", 40, 30.0, seed=2, body=body)
+    z, raw = predict_latents(smoothed, motion), predict_latents(plain, motion)
+    # 0.1 s at 30 fps: σ = 3 frames, mirrored at the ends; ΣL columns smoothed one by one.
+    expected = gaussian_filter1d(raw.numpy(), 3.0, axis=0, mode="mirror")
+    np.testing.assert_allclose(z.numpy(), expected, atol=1e-6)
+    assert (z.diff(n=2, dim=0).abs().mean() < 0.5 * raw.diff(n=2, dim=0).abs().mean()).item()
+
+    code, output = _run(["train", "combine", first, second, "--out", tmp_path / "x",
+                         "--latent-smoothing", "-1"])  # fmt: skip
+    assert code == 2 and "-1" in output and not (tmp_path / "x").exists(), output
+    info["latent_smoothing_s"] = -0.5
+    (out / "model.json").write_text(json.dumps(info))
+    with pytest.raises(ModelError, match="latent_smoothing_s must be a finite number"):
+        load_learned_model(out)
+    del info["latent_smoothing_s"]  # models written before the setting: no smoothing
+    (out / "model.json").write_text(json.dumps(info))
+    assert load_learned_model(out).latent_smoothing == 0.0
 
 
 def test_saved_model_files_get_the_usual_permissions(tmp_path, body, template):

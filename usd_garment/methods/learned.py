@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 import torch
+from scipy.ndimage import gaussian_filter1d
 
 from usd_garment.body.model import BodyModel
 from usd_garment.canonical.push_out import push_out_canonical
@@ -96,7 +97,9 @@ def learned_method(name: str, model: str | Path | None = None) -> LearnedMethod:
 def predict_latents(model: LearnedModel, motion: SmplMotion) -> torch.Tensor:
     """The regressors' latent codes ``(T, ΣL_m)`` for the frames of ``motion``, the members'
     side by side: each member's motion descriptor γ at the model's 30 fps (the motion resampled
-    once), its GRU, the codes interpolated back to the motion's frames (:func:`to_frames`).
+    once), its GRU, the codes smoothed in time when the model says so (a Gaussian of
+    ``model.latent_smoothing`` seconds, reflected at the ends), then interpolated back to the
+    motion's frames (:func:`to_frames`).
 
     The members' GRUs run in threads: a recurrence is a chain of small matrix products that
     keeps one core busy, so on two cores three members take about half the time."""
@@ -107,7 +110,12 @@ def predict_latents(model: LearnedModel, motion: SmplMotion) -> torch.Tensor:
         gammas.append(gamma)
     with ThreadPoolExecutor(len(model.members)) as pool:
         codes = list(pool.map(lambda m, g: m.regressor.predict(g, betas), model.members, gammas))
-    return to_frames(torch.cat(codes, dim=1), motion.fps, motion.num_frames)
+    z = torch.cat(codes, dim=1)
+    if model.latent_smoothing > 0 and len(z) > 1:
+        sigma = model.latent_smoothing * MODEL_FPS
+        smoothed = gaussian_filter1d(z.cpu().numpy(), sigma, axis=0, mode="mirror")
+        z = torch.from_numpy(smoothed).to(z.device)
+    return to_frames(z, motion.fps, motion.num_frames)
 
 
 def to_frames(values: torch.Tensor, fps: float, count: int) -> torch.Tensor:

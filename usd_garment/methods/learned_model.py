@@ -7,6 +7,9 @@ A model holds one or more *members*, each a full set of those networks trained o
 seeds, other sizes): the model's garment is the mean of the members' canonical garments, posed
 once (an ensemble; :func:`combine_models` makes one from trained models).
 
+A model may smooth its latent codes in time before decoding (``latent_smoothing_s``: the standard
+deviation, in seconds, of a Gaussian over the codes at the model's 30 fps; 0, no smoothing).
+
 ``model.json`` also carries what a person needs to trust it: the command and configuration that
 trained it (each member's, for an ensemble), the training wall time and machine, and its
 held-out figures. Beside them, a trained model keeps its training curves and log (an ensemble,
@@ -38,8 +41,9 @@ MODEL_FORMAT = 2
 READ_FORMATS = (1, 2)
 #: The keys of ``model.json`` that describe the layout rather than the model's history.
 _LAYOUT_KEYS = frozenset(
-    ("format", "garment", "lod", "vertices", "version", "body", "architecture", "members")
-)
+    ("format", "garment", "lod", "vertices", "version", "body", "architecture", "members",
+     "latent_smoothing_s")
+)  # fmt: skip
 CONFIG_NAME = "model.json"
 WEIGHTS_NAME = "weights.safetensors"
 #: A training run's pictures and plain-text log beside its model files; an ensemble keeps its
@@ -98,6 +102,8 @@ class LearnedModel:
         garment, lod: the template it was trained on; vertices: its N.
         version: the model's version, written to garment layers as ``garment:modelVersion``.
         body_name, body_fingerprint: the body model it was trained for.
+        latent_smoothing: standard deviation (s) of the Gaussian that smooths the codes in time
+            before decoding (:func:`~usd_garment.methods.learned.predict_latents`); 0: none.
         info: everything else of ``model.json`` (training command, config, wall time, machine,
             held-out figures).
     """
@@ -109,6 +115,7 @@ class LearnedModel:
     version: str
     body_name: str
     body_fingerprint: str
+    latent_smoothing: float = 0.0
     info: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -170,6 +177,7 @@ def save_learned_model(
         "vertices": model.vertices,
         "version": model.version,
         "body": {"name": model.body_name, "fingerprint": model.body_fingerprint},
+        "latent_smoothing_s": model.latent_smoothing,
         "members": members,
         **model.info,
     }
@@ -205,13 +213,21 @@ def load_learned_model(path: str | Path, body: BodyModel | None = None) -> Learn
         ]
         meta = {k: config[k] for k in ("garment", "lod", "vertices", "version")}
         body_name, fingerprint = config["body"]["name"], config["body"]["fingerprint"]
-    except (KeyError, TypeError, RuntimeError) as exc:
+        smoothing = float(config.get("latent_smoothing_s", 0.0))
+    except (KeyError, TypeError, ValueError, RuntimeError) as exc:
         raise ModelError(f"{path}: model files do not match ({exc})") from None
+    if not (np.isfinite(smoothing) and smoothing >= 0):
+        raise ModelError(f"{path}: latent_smoothing_s must be a finite number ≥ 0, not {smoothing}")
     if not members:
         raise ModelError(f"{path}: a model with no members")
     info = {k: v for k, v in config.items() if k not in _LAYOUT_KEYS}
     model = LearnedModel(
-        members, **meta, body_name=body_name, body_fingerprint=fingerprint, info=info
+        members,
+        **meta,
+        body_name=body_name,
+        body_fingerprint=fingerprint,
+        latent_smoothing=smoothing,
+        info=info,
     )
     if body is not None:
         model.check_body(body)
@@ -236,7 +252,9 @@ def _load_member(entry: dict[str, Any], tensors: dict[str, torch.Tensor], prefix
     return Member(**parts, info=info)  # type: ignore[arg-type]
 
 
-def combine_models(paths: list[str | Path], version: str | None = None) -> LearnedModel:
+def combine_models(
+    paths: list[str | Path], version: str | None = None, latent_smoothing: float = 0.0
+) -> LearnedModel:
     """One model whose members are those of the model directories ``paths`` (an ensemble: its
     garment is the mean of theirs). Each member keeps what its model's ``model.json`` said of
     it (command, training, figures) and where it came from; the combined model's own ``info``
@@ -244,13 +262,16 @@ def combine_models(paths: list[str | Path], version: str | None = None) -> Learn
 
     Args:
         version: the combined model's version (None: the first model's, with ``-ensemble``).
+        latent_smoothing: the combined model's :attr:`LearnedModel.latent_smoothing` (s).
 
     Raises:
-        ModelError: fewer than two models, an unreadable one, or models of another garment,
-            level of detail or body than the first.
+        ModelError: fewer than two models, an unreadable one, models of another garment,
+            level of detail or body than the first, or a negative ``latent_smoothing``.
     """
     if len(paths) < 2:
         raise ModelError("combining needs at least two models")
+    if not (np.isfinite(latent_smoothing) and latent_smoothing >= 0):
+        raise ModelError(f"latent smoothing must be finite and ≥ 0 s, not {latent_smoothing}")
     models = [load_learned_model(path) for path in paths]
     first = models[0]
     members = []
@@ -276,6 +297,7 @@ def combine_models(paths: list[str | Path], version: str | None = None) -> Learn
         version=version if version is not None else f"{first.version}-ensemble",
         body_name=first.body_name,
         body_fingerprint=first.body_fingerprint,
+        latent_smoothing=latent_smoothing,
     )
 
 
