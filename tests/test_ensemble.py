@@ -146,6 +146,8 @@ def test_latent_smoothing_is_a_gaussian_over_the_codes_at_30_fps(tmp_path, body,
     expected = gaussian_filter1d(raw.numpy(), 3.0, axis=0, mode="mirror")
     np.testing.assert_allclose(z.numpy(), expected, atol=1e-6)
     assert (z.diff(n=2, dim=0).abs().mean() < 0.5 * raw.diff(n=2, dim=0).abs().mean()).item()
+    assert _run(["train", "member", out, "--index", "1", "--out", tmp_path / "m1"])[0] == 0
+    assert load_learned_model(tmp_path / "m1").latent_smoothing == 0.1  # benched as it runs
 
     code, output = _run(["train", "combine", first, second, "--out", tmp_path / "x",
                          "--latent-smoothing", "-1"])  # fmt: skip

@@ -309,8 +309,8 @@ def _member_name(name: str, index: int) -> str:
 
 def member_model(model: LearnedModel, index: int) -> LearnedModel:
     """The one-member model of ``model``'s member ``index`` (0-based), to run or bench it alone:
-    its networks and record, ``model``'s garment and body, version ``{version}-member{index}``,
-    its own ``info`` empty (the caller records how it was made).
+    its networks and record, ``model``'s garment, body and latent smoothing, version
+    ``{version}-member{index}``, its own ``info`` empty (the caller records how it was made).
 
     Raises:
         ModelError: no such member.
