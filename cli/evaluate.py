@@ -33,6 +33,10 @@ ROWS = (
 )
 
 
+#: Body parts named in the summary's line on where the vertices inside elsewhere are.
+PARTS_SHOWN = 5
+
+
 def _cell(value: float | int | None, fmt: str) -> str:
     if value is None or (isinstance(value, float) and math.isnan(value)):
         return "-"
@@ -83,6 +87,11 @@ def evaluate(
     click.echo(f"{garment_layer}: {len(time_codes)} frames")
     for key, label, fmt in ROWS:
         click.echo(f"  {label:<34}{_cell(summary[key], fmt)}")
+    parts = metrics.elsewhere_by_part()
+    if parts:
+        top = list(parts.items())[:PARTS_SHOWN]
+        shares = ", ".join(f"{name} {share:.1%}" for name, share in top)
+        click.echo(f"  inside elsewhere by body part (closest point): {shares}")
     if per_frame:
         table = metrics.per_frame()
         click.echo("time   " + "  ".join(f"{k:>20}" for k, _, _ in ROWS))

@@ -15,7 +15,7 @@ from usd_garment.body.model import BodyModel
 from usd_garment.dress import dress
 from usd_garment.eval.body_distance import BodySurface, signed_distance
 from usd_garment.eval.evaluate import evaluate_layer, posed_body_vertices
-from usd_garment.eval.metrics import evaluate_garment
+from usd_garment.eval.metrics import evaluate_garment, face_joints
 from usd_garment.eval.push_out import PUSH_OUT_EPS
 from usd_garment.methods import available_methods, get_method
 from usd_garment.usd.body_layer import write_body_layer
@@ -114,6 +114,29 @@ def test_metrics_jitter_and_nans() -> None:
     np.testing.assert_allclose(m.max_penetration_mm, 100.0, rtol=0.05)
     assert m.summary()["nan_count"] == 1
     assert m.to_json()["per_frame"]["acceleration"][0] is None
+
+
+def test_eval_counts_where_the_vertices_inside_elsewhere_are() -> None:
+    """Two separate spheres as the body's parts 'spine2' (6) and 'left_shoulder' (16): points
+    inside each are counted on that part, by the triangle their closest point lies on."""
+    a = trimesh.creation.icosphere(subdivisions=2, radius=0.1)
+    b = a.copy()
+    b.apply_translation([0.5, 0.0, 0.0])
+    verts = np.concatenate([a.vertices, b.vertices])[None].repeat(2, axis=0)
+    faces = np.concatenate([a.faces, b.faces + len(a.vertices)])
+    parts = np.repeat([6, 16], len(a.faces))
+    points = np.array([[0.0, 0.0, 0.05], [0.02, 0.0, 0.0], [0.0, -0.03, 0.0],  # in sphere a
+                       [0.5, 0.0, 0.06], [0.2, 0.0, 0.0]])[None].repeat(2, axis=0)  # fmt: skip
+    m = evaluate_garment(points, verts, faces, 30.0, face_parts=parts)
+    np.testing.assert_allclose(m.inside_elsewhere_share, [0.8, 0.8])
+    assert m.elsewhere_part_counts is not None
+    assert (
+        m.elsewhere_part_counts[[6, 16]].tolist() == [6, 2] and m.elsewhere_part_counts.sum() == 8
+    )
+    assert m.elsewhere_by_part() == {"spine2": 0.75, "left_shoulder": 0.25}
+    assert m.to_json()["elsewhere_by_part"] == {"spine2": 0.75, "left_shoulder": 0.25}
+    assert evaluate_garment(points, verts, faces, 30.0).elsewhere_by_part() == {}
+    assert face_joints(np.eye(3)[[0, 0, 2, 2]], np.array([[0, 1, 2], [1, 2, 3]])).tolist() == [0, 2]
 
 
 def test_methods_registry() -> None:

@@ -54,17 +54,23 @@ class BodyDistance:
         closest_inside: ``(T, N)`` whether the closest point lies inside another part of the
             body; only probed where ``distance`` is below the query's ``probe_below``
             (False elsewhere).
+        face: ``(T, N)`` index of the body triangle the closest point lies on.
     """
 
     distance: np.ndarray
     closest: np.ndarray
     normal: np.ndarray
     closest_inside: np.ndarray
+    face: np.ndarray
 
     def frames(self, a: int, b: int) -> BodyDistance:
         """The result for frames ``a .. b-1``."""
         return BodyDistance(
-            self.distance[a:b], self.closest[a:b], self.normal[a:b], self.closest_inside[a:b]
+            self.distance[a:b],
+            self.closest[a:b],
+            self.normal[a:b],
+            self.closest_inside[a:b],
+            self.face[a:b],
         )
 
     @property
@@ -290,7 +296,8 @@ def signed_distance(
             [surface.faces.numpy()] * len(starts), [probe_below] * len(starts),
         ))  # fmt: skip
         return BodyDistance(*(np.concatenate(arrays) for arrays in zip(
-            *((p.distance, p.closest, p.normal, p.closest_inside) for p in parts), strict=True
+            *((p.distance, p.closest, p.normal, p.closest_inside, p.face) for p in parts),
+            strict=True,
         )))  # fmt: skip
     pts = torch.as_tensor(points).float()
     if frames is None:  # each frame's structures are used once here: not kept
@@ -302,6 +309,7 @@ def signed_distance(
     dist = np.empty((t_frames, n))
     closest = np.empty((t_frames, n, 3))
     normal = np.empty((t_frames, n, 3))
+    closest_face = np.empty((t_frames, n), dtype=np.int64)
     for s in range(0, t_frames, chunk):
         p, v = pts[s : s + chunk], verts[s : s + chunk]
         b = p.shape[0]
@@ -329,6 +337,7 @@ def signed_distance(
             pseudo[at_vertex] = surface.vertex_normals(v, at_vertex[0], corner[at_vertex])
         closest[s : s + b] = q.numpy()
         normal[s : s + b] = pseudo.numpy()
+        closest_face[s : s + b] = face.numpy()
         dist[s : s + b] = (p - q).norm(dim=-1).numpy()
     closest_inside = np.zeros((t_frames, n), dtype=bool)
     for t in range(t_frames):
@@ -339,7 +348,7 @@ def signed_distance(
         if probe.size:
             at = closest[t, probe] + FORCED_PROBE * normal[t, probe]
             closest_inside[t, probe] = tree_winding_numbers(tree, at) > WINDING_INSIDE
-    return BodyDistance(dist, closest, normal, closest_inside)
+    return BodyDistance(dist, closest, normal, closest_inside, closest_face)
 
 
 class BodyPool:

@@ -11,7 +11,7 @@ import torch
 from usd_garment.body.io import load_body_model
 from usd_garment.body.model import BodyModel
 from usd_garment.eval.body_distance import BodyPool
-from usd_garment.eval.metrics import GarmentMetrics, evaluate_garment
+from usd_garment.eval.metrics import GarmentMetrics, evaluate_garment, face_joints
 from usd_garment.garment.lod import carry_to_lod, lod_with_vertices
 from usd_garment.garment.template import GARMENT_NAMES
 from usd_garment.motion.sequence import SmplMotion
@@ -94,5 +94,7 @@ def evaluate_layer(
         ref = ref_points[_frame_index(ref_info.time_codes, info.time_codes, str(reference))]
     step = float(np.median(np.diff(info.time_codes))) if len(info.time_codes) > 1 else 1.0
     fps = info.time_codes_per_second / step
-    metrics = evaluate_garment(points, vertices, body.faces.numpy(), fps, ref, pool)
+    faces = body.faces.numpy()
+    parts = face_joints(body.weights.numpy(), faces)
+    metrics = evaluate_garment(points, vertices, faces, fps, ref, pool, face_parts=parts)
     return metrics, info.time_codes

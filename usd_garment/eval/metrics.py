@@ -1,6 +1,7 @@
 """Garment quality figures per frame and over a sequence: collisions with the posed body (share of
 vertices inside by winding number, split into forced and elsewhere, and within 1 mm of the
-surface; penetration depth), distance to a reference, jitter and NaNs."""
+surface; penetration depth; where on the body the vertices inside elsewhere are), distance to a
+reference, jitter and NaNs."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from usd_garment.body.joints import SMPL_JOINT_NAMES
 from usd_garment.eval.body_distance import BodyPool, BodySurface, signed_distance
 
 #: A vertex is "within" the body's contact band when its signed distance is below this (m).
@@ -33,6 +35,9 @@ class GarmentMetrics:
         acceleration: mean per-vertex acceleration magnitude (m/s²), central second difference;
             NaN on the first and last frame.
         nan_count: vertices with a NaN or infinite coordinate.
+        elsewhere_part_counts: ``(J,)`` vertex-frames inside elsewhere over the sequence, by the
+            body part of their closest point (the joint that moves its triangle most); None when
+            the body's parts were not given.
     """
 
     inside_share: np.ndarray
@@ -45,6 +50,17 @@ class GarmentMetrics:
     reference_mm: np.ndarray
     acceleration: np.ndarray
     nan_count: np.ndarray
+    elsewhere_part_counts: np.ndarray | None = None
+
+    def elsewhere_by_part(self) -> dict[str, float]:
+        """Share of the vertex-frames inside elsewhere on each body part that has any, largest
+        first, keyed by SMPL joint name (empty when none is inside elsewhere or the parts are
+        unknown)."""
+        counts = self.elsewhere_part_counts
+        if counts is None or counts.sum() == 0:
+            return {}
+        order = np.argsort(-counts, kind="stable")
+        return {SMPL_JOINT_NAMES[j]: float(counts[j] / counts.sum()) for j in order if counts[j]}
 
     def summary(self) -> dict[str, float | int | None]:
         """Sequence figures: means over frames (max for depth, sum for NaNs); None if undefined."""
@@ -84,6 +100,7 @@ class GarmentMetrics:
 
         return {
             "summary": self.summary(),
+            "elsewhere_by_part": self.elsewhere_by_part(),
             "per_frame": {k: clean(v) for k, v in self.per_frame().items()},
         }
 
@@ -95,10 +112,13 @@ def evaluate_garment(
     fps: float,
     reference: np.ndarray | None = None,
     pool: BodyPool | None = None,
+    face_parts: np.ndarray | None = None,
 ) -> GarmentMetrics:
     """Figures of a garment ``(T, N, 3)`` (m) on the posed body ``(T, V, 3)`` with faces
     ``(F, 3)``, sampled at ``fps``; ``reference`` ``(T, N, 3)`` (m) is optional; ``pool``:
-    worker processes that measure blocks of frames (the same figures)."""
+    worker processes that measure blocks of frames (the same figures); ``face_parts`` ``(F,)``:
+    the SMPL joint of each body face (:func:`face_joints`), to count where the vertices inside
+    elsewhere are."""
     points = np.asarray(points, dtype=np.float64)
     t_frames, n = points.shape[:2]
     finite = np.isfinite(points).all(axis=-1)  # (T, N)
@@ -110,6 +130,10 @@ def evaluate_garment(
     inside = dist < 0
     forced = query.forced & finite
     elsewhere = query.elsewhere & finite
+    part_counts = None
+    if face_parts is not None:
+        where = np.asarray(face_parts)[query.face[elsewhere]]
+        part_counts = np.bincount(where, minlength=len(SMPL_JOINT_NAMES))
     depth = np.where(inside, -dist, 0.0)
     n_inside = inside.sum(axis=1)
     reference_mm = np.full(t_frames, np.nan)
@@ -135,4 +159,11 @@ def evaluate_garment(
         reference_mm=reference_mm,
         acceleration=acceleration,
         nan_count=n - finite.sum(axis=1),
+        elsewhere_part_counts=part_counts,
     )
+
+
+def face_joints(weights: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """The body part of each face ``(F,)``: the joint with the largest skinning weight summed
+    over its three corners; ``weights`` ``(V, J)``, ``faces`` ``(F, 3)``."""
+    return np.asarray(weights)[np.asarray(faces)].sum(axis=1).argmax(axis=1)
