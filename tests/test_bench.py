@@ -75,6 +75,12 @@ def test_bench_command_writes_table_chart_and_curves(tmp_path: Path, walk: Path)
     )
     payload = json.loads((report / "report.json").read_text())
     assert len(payload["chart"]) == 5 and payload["wall_seconds"] > 0
+    # Where the vertices inside elsewhere are: a part list exactly where there are some.
+    for r in payload["rows"]:
+        shares = r["elsewhere_by_part"]
+        assert bool(shares) == (r["summary"]["inside_elsewhere_share"] > 0), r["label"]
+        assert not shares or sum(shares.values()) == pytest.approx(1.0)
+    assert rows["lbs+postprocess", "low"]["elsewhere_parts"] == ""
     assert all(len(r["inside_elsewhere"]) == 6 for r in payload["rows"])
     again = load_report(report / "report.json")  # the chart can be redrawn from the report
     assert [(r.label, r.lod) for r in again] == [(r["label"], r["lod"]) for r in payload["rows"]]

@@ -80,6 +80,9 @@ class BenchRow:
             the reference carried to this level of detail; None without a reference).
         inside_elsewhere: ``(T,)`` per-frame share inside the body elsewhere.
         inside_forced: ``(T,)`` per-frame share inside where the body is pressed into itself.
+        elsewhere_by_part: share of the vertex-frames inside elsewhere on each body part
+            (:meth:`GarmentMetrics.elsewhere_by_part`); empty for none, and in reports written
+            before stop 33.
         error: the failure's one-line message when the method failed on this input, else "".
     """
 
@@ -95,6 +98,7 @@ class BenchRow:
     inside_elsewhere: list[float] = field(default_factory=list)
     inside_forced: list[float] = field(default_factory=list)
     error: str = ""
+    elsewhere_by_part: dict[str, float] = field(default_factory=dict)
 
 
 #: Columns of the CSV table (summary figures after the run's own columns).
@@ -191,6 +195,7 @@ def _set_metrics(row: BenchRow, metrics: GarmentMetrics, frames: int) -> None:
     row.summary = metrics.summary()
     row.inside_elsewhere = [float(v) for v in metrics.inside_elsewhere_share]
     row.inside_forced = [float(v) for v in metrics.inside_forced_share]
+    row.elsewhere_by_part = metrics.elsewhere_by_part()
 
 
 @dataclass
@@ -297,16 +302,26 @@ def write_report(
         writer = csv.writer(handle)
         writer.writerow(
             ["input", "method", "lod", "frames", "vertices", "frames_per_second", "read_s",
-             "compute_s", "write_s", *CSV_SUMMARY, "error"]
+             "compute_s", "write_s", *CSV_SUMMARY, "error", "elsewhere_parts"]
         )  # fmt: skip
         for r in rows:
             s = r.seconds
             writer.writerow(
                 [r.input, r.label, r.lod, r.frames, r.vertices, _cell(r.frames_per_second),
                  *(_cell(s.get(k)) for k in ("read", "compute", "write")),
-                 *(_cell(r.summary.get(k)) for k in CSV_SUMMARY), r.error]
+                 *(_cell(r.summary.get(k)) for k in CSV_SUMMARY), r.error,
+                 _parts_cell(r.elsewhere_by_part)]
             )  # fmt: skip
     return json_path, csv_path
+
+
+#: Body parts named in a CSV row's ``elsewhere_parts`` cell, largest share first.
+CSV_PARTS = 3
+
+
+def _parts_cell(parts: dict[str, float]) -> str:
+    """``"spine2 61.1%; left_shoulder 20.6%; ..."``: the largest :data:`CSV_PARTS` shares."""
+    return "; ".join(f"{name} {share:.1%}" for name, share in list(parts.items())[:CSV_PARTS])
 
 
 def load_report(path: str | Path) -> list[BenchRow]:
