@@ -57,10 +57,11 @@ class GarmentMetrics:
         first, keyed by SMPL joint name (empty when none is inside elsewhere or the parts are
         unknown)."""
         counts = self.elsewhere_part_counts
-        if counts is None or counts.sum() == 0:
+        if counts is None or not counts.any():
             return {}
+        total = int(counts.sum())
         order = np.argsort(-counts, kind="stable")
-        return {SMPL_JOINT_NAMES[j]: float(counts[j] / counts.sum()) for j in order if counts[j]}
+        return {SMPL_JOINT_NAMES[j]: float(counts[j] / total) for j in order if counts[j]}
 
     def summary(self) -> dict[str, float | int | None]:
         """Sequence figures: means over frames (max for depth, sum for NaNs); None if undefined."""

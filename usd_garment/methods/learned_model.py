@@ -216,8 +216,7 @@ def load_learned_model(path: str | Path, body: BodyModel | None = None) -> Learn
         smoothing = float(config.get("latent_smoothing_s", 0.0))
     except (KeyError, TypeError, ValueError, RuntimeError) as exc:
         raise ModelError(f"{path}: model files do not match ({exc})") from None
-    if not (np.isfinite(smoothing) and smoothing >= 0):
-        raise ModelError(f"{path}: latent_smoothing_s must be a finite number ≥ 0, not {smoothing}")
+    _check_smoothing(smoothing, f"{path}: ")
     if not members:
         raise ModelError(f"{path}: a model with no members")
     info = {k: v for k, v in config.items() if k not in _LAYOUT_KEYS}
@@ -232,6 +231,13 @@ def load_learned_model(path: str | Path, body: BodyModel | None = None) -> Learn
     if body is not None:
         model.check_body(body)
     return model
+
+
+def _check_smoothing(seconds: float, where: str = "") -> None:
+    """Raise :class:`ModelError` unless ``seconds`` is a usable
+    :attr:`LearnedModel.latent_smoothing`: finite and ≥ 0 (``where`` prefixes the message)."""
+    if not (np.isfinite(seconds) and seconds >= 0):
+        raise ModelError(f"{where}latent_smoothing_s must be a finite number ≥ 0, not {seconds}")
 
 
 def _load_member(entry: dict[str, Any], tensors: dict[str, torch.Tensor], prefix: str) -> Member:
@@ -270,8 +276,7 @@ def combine_models(
     """
     if len(paths) < 2:
         raise ModelError("combining needs at least two models")
-    if not (np.isfinite(latent_smoothing) and latent_smoothing >= 0):
-        raise ModelError(f"latent smoothing must be finite and ≥ 0 s, not {latent_smoothing}")
+    _check_smoothing(latent_smoothing)
     models = [load_learned_model(path) for path in paths]
     first = models[0]
     members = []
