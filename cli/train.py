@@ -8,12 +8,18 @@ import json
 import shlex
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
 from tqdm import tqdm
 
 from usd_garment.cli.errors import user_errors
+
+if TYPE_CHECKING:
+    from usd_garment.body.model import BodyModel
+    from usd_garment.canonical.dataset import CanonicalSet
+    from usd_garment.fields.body_fields import BodyFields
+    from usd_garment.training.posed_planes import PosedPlanes
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -120,6 +126,9 @@ def _run(
             json.dumps(settings.to_dict(), indent=1) + "\n", encoding="utf-8"
         )
         for stage in stages:
+            planes = None
+            if stage == "regressor" and settings.regressor.lambda_posed > 0:
+                planes = _posed_planes(canonical, body, fields)
             bar = tqdm(desc=stage, unit="epoch", disable=None)
 
             def progress(name: str, epoch: int, total: int, row: dict[str, Any]) -> None:
@@ -130,8 +139,8 @@ def _run(
 
             try:
                 record = train_stage(
-                    stage, canonical, out, settings, fields=fields, resume=resume,
-                    progress=progress,
+                    stage, canonical, out, settings, fields=fields, planes=planes,
+                    resume=resume, progress=progress,
                 )  # fmt: skip
             finally:
                 bar.close()
@@ -149,6 +158,21 @@ def _run(
             command = _command_line(stages, data, out, device, config_path, ablation, epochs)
             assemble_model(out, canonical, body, settings, {"command": command})
             click.echo(f"wrote the model {out}")
+
+
+def _posed_planes(canonical: CanonicalSet, body: BodyModel, fields: BodyFields) -> PosedPlanes:
+    """The posed collision planes of the training and validation frames, with a progress bar
+    (one query of the posed body per frame: minutes for a few thousand frames)."""
+    from usd_garment.eval.body_distance import body_pool
+    from usd_garment.training.posed_planes import posed_planes
+
+    with tqdm(desc="posed planes", unit="sequence", disable=None) as bar, body_pool(2) as pool:
+
+        def progress(done: int, total: int) -> None:
+            bar.total = total
+            bar.update(done - bar.n)
+
+        return posed_planes(canonical, body, fields, pool=pool, progress=progress)
 
 
 def _stage_command(name: str, stages: tuple[str, ...], help_text: str) -> None:

@@ -30,6 +30,7 @@ from usd_garment.training.pose import (
     garment_joint_weights,
     train_pose_codec,
 )
+from usd_garment.training.posed_planes import PosedPlanes
 from usd_garment.training.regressor import (
     RegressorTrainConfig,
     latent_losses,
@@ -477,3 +478,55 @@ def test_regressor_regularisation_settings() -> None:
     for bad in ({"weight_decay": -1.0}, {"input_noise": -0.1}):
         with pytest.raises(ValueError, match="must not be negative"):
             train_regressor(data, _encode, _codec(), _small_config(**small, **bad))
+
+
+def test_regressor_posed_term_moves_garments_off_their_planes() -> None:
+    """L_posed pushes the decoded garments out of planes that the targets lie behind (vertex 0,
+    1 cm behind in every frame); without it the planes are only measured; λ_posed > 0 without
+    planes is refused."""
+    data = synthetic_set(lengths=(40, 35, 30), splits=["train", "train", "validation"])
+    x = torch.as_tensor(data.canonical)
+    normal = torch.zeros(x.shape)
+    normal[:, 0, 0] = 1.0
+    offset = torch.zeros(x.shape[:2])
+    offset[:, 0] = -x[:, 0, 0] - 0.01
+    valid = torch.zeros(x.shape[:2], dtype=torch.bool)
+    valid[:, 0] = True
+    planes = PosedPlanes(normal, offset, valid)
+    small = {"hidden": (16,), "epochs": 20, "crops_per_epoch": 32}
+
+    def last_row(**changes) -> dict:
+        config = _small_config(**small, **changes)
+        _, history = train_regressor(data, _encode, _codec(), config, decode=_decode, planes=planes)
+        return history["epochs"][-1]
+
+    plain, held = last_row(), last_row(lambda_posed=100.0)
+    assert "train_posed" not in plain and held["train_posed"] > 0
+    assert plain["val_posed_inside_pct"] > 10.0  # vertex 0 of 6 behind its plane: 16.7 %
+    assert held["val_posed_inside_pct"] < 0.6 * plain["val_posed_inside_pct"]
+    with pytest.raises(ValueError, match="planes"):
+        train_regressor(data, _encode, _codec(), _small_config(**small, lambda_posed=1.0))
+
+
+def test_regressor_fine_tunes_from_an_initial_one() -> None:
+    """``initial`` starts the training from its weights and normalisation (no epochs: the same
+    regressor); one of another shape is refused."""
+    data = synthetic_set(lengths=(40, 35, 30), splits=["train", "train", "validation"])
+    small = {"hidden": (16,), "epochs": 3, "crops_per_epoch": 8}
+    first, history = train_regressor(data, _encode, _codec(), _small_config(**small))
+    same, _ = train_regressor(
+        data, _encode, _codec(), _small_config(**{**small, "epochs": 0}), initial=first
+    )
+    for key, value in first.state_dict().items():
+        torch.testing.assert_close(same.state_dict()[key], value)
+    _, tuned_history = train_regressor(
+        data, _encode, _codec(), _small_config(**{**small, "epochs": 1, "lr": 1e-5}), initial=first
+    )
+    # a tiny step from the initial weights, not a fresh start
+    assert tuned_history["epochs"][0]["val_pos"] == pytest.approx(
+        history["epochs"][-1]["val_pos"], rel=0.05
+    )
+    with pytest.raises(ValueError, match="initial regressor"):
+        train_regressor(
+            data, _encode, _codec(), _small_config(hidden=(8,), epochs=1), initial=first
+        )

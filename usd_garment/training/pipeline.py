@@ -42,6 +42,7 @@ from usd_garment.training.pose import (
     garment_joint_weights,
     train_pose_codec,
 )
+from usd_garment.training.posed_planes import PosedPlanes
 from usd_garment.training.regressor import RegressorTrainConfig, train_regressor
 from usd_garment.training.vae import VaeTrainConfig, split_frames, train_vae
 
@@ -162,10 +163,13 @@ def train_stage(
     settings: TrainSettings,
     *,
     fields: BodyFields,
+    planes: PosedPlanes | None = None,
     resume: bool = False,
     progress: StageProgress | None = None,
 ) -> dict[str, Any]:
-    """Train one stage in the run ``folder`` (created) and save it there.
+    """Train one stage in the run ``folder`` (created) and save it there. ``planes``: the
+    posed collision planes of ``data`` (:func:`posed_planes`), for a regressor trained with
+    ``lambda_posed`` > 0.
 
     Returns:
         The stage's record: ``stage``, ``config``, ``architecture``, ``history``, ``seconds``.
@@ -209,12 +213,18 @@ def train_stage(
         vae, _ = load_stage(folder, "vae")
         assert isinstance(vae, GarmentVAE) and isinstance(codec, PoseCodec)
         vae = vae.to(config.device)
+        initial = None
+        if config.init_from is not None:
+            initial, _ = load_stage(config.init_from, "regressor")
+            assert isinstance(initial, GarmentRegressor)
         net, history = train_regressor(
             data,
             lambda x: vae.encode(x)[0],
             codec.to(config.device),
             config,
             decode=vae.decode,
+            planes=planes,
+            initial=initial,
             progress=report,
             checkpoint=checkpoint,
             resume=resume,

@@ -2,7 +2,9 @@
 training set: the targets are the latent codes z of the canonical garments (the VAE encoder's
 mean, given by the caller), the inputs the motion descriptor γ of each sequence at the model's
 30 fps and its body shape β; the loss is L_pos + ρ1·L_vel + ρ2·L_acc, L1 on z and on its
-per-frame first and second differences, over random crops of the training sequences."""
+per-frame first and second differences, over random crops of the training sequences; optionally
+plus λ_posed·L_posed, the decoded garments held out of the posed body by the training targets'
+collision planes pulled back to canonical space (:mod:`usd_garment.training.posed_planes`)."""
 
 from __future__ import annotations
 
@@ -17,11 +19,13 @@ import numpy as np
 import torch
 
 from usd_garment.canonical.dataset import CanonicalSet
+from usd_garment.generative.losses import COLLISION_EPSILON
 from usd_garment.motion.resample import resample_motion
 from usd_garment.regressor.descriptor import MODEL_FPS, descriptor_size, motion_descriptor
 from usd_garment.regressor.gru import GarmentRegressor
 from usd_garment.regressor.pose_code import PoseCodec
 from usd_garment.training.checkpoint import resume_checkpoint, save_checkpoint
+from usd_garment.training.posed_planes import PosedPlanes
 
 #: ``progress(epoch, total, row)``: called after each epoch (1-based) with its history row.
 EpochProgress = Callable[[int, int, dict[str, Any]], None]
@@ -55,6 +59,12 @@ class RegressorTrainConfig:
         input_noise: deviation of Gaussian noise added to each training crop's γ, in units of
             each entry's deviation over the training frames (0: none).
         encode_batch: frames per call of ``encode_latent`` and ``decode``.
+        lambda_posed: weight of L_posed (per m): Σ_i max(ε − d_i, 0) of each decoded frame's
+            vertices against its target's posed collision planes (ε = 2 mm; averaged over the
+            crops' frames); 0: none. Needs the planes and the decoder.
+        init_from: a run folder whose trained regressor (same architecture) starts the
+            training, its input and output normalisation kept (fine-tuning); None: random
+            initial weights.
         seed: seed of the initial weights and of the crops.
         device: torch device of the training (``encode_latent``/``decode`` get tensors there).
     """
@@ -73,6 +83,8 @@ class RegressorTrainConfig:
     weight_decay: float = 0.0
     input_noise: float = 0.0
     encode_batch: int = 256
+    lambda_posed: float = 0.0
+    init_from: str | None = None
     seed: int = 0
     device: str = "cpu"
 
@@ -94,12 +106,15 @@ class RegressorSequence:
         betas: ``(10,)`` body shape.
         latent: ``(T, latent)`` target latent codes z.
         canonical: ``(T, N, 3)`` canonical garments (m), kept for validation sequences only.
+        first_frame: the index of its first frame in the canonical set; None when it was
+            resampled (its frames are not the set's).
     """
 
     gamma: torch.Tensor
     betas: torch.Tensor
     latent: torch.Tensor
     canonical: torch.Tensor | None = None
+    first_frame: int | None = None
 
     @property
     def num_frames(self) -> int:
@@ -152,6 +167,7 @@ def prepare_sequence(
         betas=torch.as_tensor(motion.betas, device=device),
         latent=latent,
         canonical=x if keep_canonical else None,
+        first_frame=frames.start if np.isclose(fps, MODEL_FPS) else None,
     )
 
 
@@ -221,17 +237,21 @@ def evaluate_regressor(
     sequences: list[RegressorSequence],
     decode: DecodeLatent | None = None,
     decode_batch: int = 256,
+    planes: PosedPlanes | None = None,
 ) -> dict[str, float]:
     """Errors of ``model`` run from rest over each whole sequence.
 
     Returns:
         ``pos``, ``vel``, ``acc``: the latent L1 losses averaged over the sequences' frames
         (weighted by their frame counts); with ``decode`` and the sequences' canonical garments,
-        ``vertex_mm``: mean distance (mm) between decoded predicted and true canonical vertices.
+        ``vertex_mm``: mean distance (mm) between decoded predicted and true canonical vertices;
+        with ``decode`` and ``planes`` too, ``posed_inside_pct``: the share (%) of the decoded
+        vertices behind their posed collision plane (sequences at the set's frames).
     """
     sums = {"pos": 0.0, "vel": 0.0, "acc": 0.0}
     frames = 0
     vertex_sum, vertex_count = 0.0, 0
+    behind, planed = 0, 0
     for q in sequences:
         pred = model.predict(q.gamma, q.betas)
         losses = latent_losses(pred[None], q.latent[None])
@@ -243,10 +263,43 @@ def evaluate_regressor(
                 decoded = torch.as_tensor(decode(z)).to("cpu", torch.float32)
                 vertex_sum += float((decoded - x).norm(dim=-1).sum())
                 vertex_count += x.shape[0] * x.shape[1]
+        if decode is not None and planes is not None and q.first_frame is not None:
+            index = torch.arange(q.first_frame, q.first_frame + q.num_frames)
+            for z, f in zip(pred.split(decode_batch), index.split(decode_batch), strict=True):
+                decoded = torch.as_tensor(decode(z)).to(planes.normal.device, torch.float32)
+                behind += int(planes.inside(f, decoded).sum())
+                planed += decoded.shape[0] * decoded.shape[1]
     out = {key: value / max(frames, 1) for key, value in sums.items()}
     if vertex_count:
         out["vertex_mm"] = 1000.0 * vertex_sum / vertex_count
+    if planed:
+        out["posed_inside_pct"] = 100.0 * behind / planed
     return out
+
+
+def posed_loss(
+    pred: torch.Tensor,
+    sequences: list[RegressorSequence],
+    picks: list[tuple[int, int]],
+    decode: DecodeLatent,
+    planes: PosedPlanes,
+) -> torch.Tensor:
+    """L_posed of predicted codes ``pred`` ``(B, L, latent)`` of the crops ``picks`` (sequence,
+    first frame) of ``sequences``: their decoded garments against the posed collision planes of
+    their frames (m; :meth:`PosedPlanes.loss`). Padding and resampled sequences add nothing."""
+    rows, cols, frames = [], [], []
+    for i, (s, start) in enumerate(picks):
+        q = sequences[s]
+        if q.first_frame is None:
+            continue
+        n = min(pred.shape[1], q.num_frames - start)
+        rows.append(torch.full((n,), i))
+        cols.append(torch.arange(n))
+        frames.append(torch.arange(q.first_frame + start, q.first_frame + start + n))
+    if not rows:
+        return pred.new_zeros(())
+    x = decode(pred[torch.cat(rows), torch.cat(cols)])
+    return planes.loss(torch.cat(frames), x.to(planes.normal.device), COLLISION_EPSILON)
 
 
 @torch.no_grad()
@@ -272,6 +325,8 @@ def train_regressor(
     config: RegressorTrainConfig | None = None,
     *,
     decode: DecodeLatent | None = None,
+    planes: PosedPlanes | None = None,
+    initial: GarmentRegressor | None = None,
     progress: EpochProgress | None = None,
     checkpoint: str | Path | None = None,
     resume: bool = False,
@@ -286,6 +341,12 @@ def train_regressor(
         config: training settings (defaults if None).
         decode: the VAE decoder ``z (T, latent) -> X (T, N, 3)``; given, validation also reports
             the canonical vertex error in mm.
+        planes: the posed collision planes of ``data``'s frames (:func:`posed_planes`); needed
+            when ``config.lambda_posed`` > 0; given, validation also reports
+            ``posed_inside_pct``.
+        initial: the regressor whose weights and normalisation start the training (the one
+            ``config.init_from`` names); None: seeded random weights, normalisation from the
+            training frames.
         progress: called after every epoch.
         checkpoint: file written after every epoch (``torch.save`` of the model, its config,
             the optimiser, the epoch, the history, the training config and the random state).
@@ -298,8 +359,9 @@ def train_regressor(
         frame counts, ``decoder_floor_mm`` (the validation vertex error of the true latents when
         ``decode`` is given) and ``epochs``, one row per epoch: ``epoch`` (1-based), ``lr``,
         ``train_loss``, ``train_pos``, ``train_vel``, ``train_acc`` (means over the epoch's
-        batches), ``val_pos``, ``val_vel``, ``val_acc`` and ``val_vertex_mm`` (when there are
-        validation sequences, and a decoder for the last), ``seconds``.
+        batches; ``train_posed`` too with λ_posed > 0), ``val_pos``, ``val_vel``, ``val_acc``,
+        ``val_vertex_mm`` and ``val_posed_inside_pct`` (when there are validation sequences,
+        and a decoder and planes for the last two), ``seconds``.
 
     The same data and config give the same result on the CPU (seeded weights and draws; the
     global torch random state is left alone); CUDA kernels may not be bitwise deterministic.
@@ -311,8 +373,10 @@ def train_regressor(
     config = config or RegressorTrainConfig()
     if config.crop_length < 3 or config.batch_size < 1:
         raise ValueError("crop_length must be at least 3 and batch_size at least 1")
-    if config.weight_decay < 0 or config.input_noise < 0:
-        raise ValueError("weight_decay and input_noise must not be negative")
+    if config.weight_decay < 0 or config.input_noise < 0 or config.lambda_posed < 0:
+        raise ValueError("weight_decay, input_noise and lambda_posed must not be negative")
+    if config.lambda_posed > 0 and (planes is None or decode is None):
+        raise ValueError("lambda_posed > 0 needs the posed collision planes and the decoder")
     train_ids = data.split_sequences("train")
     if not train_ids:
         raise ValueError("the canonical set has no 'train' sequences")
@@ -331,8 +395,15 @@ def train_regressor(
         model = GarmentRegressor(
             descriptor_size(codec.code_size), config.hidden, latent_size, train[0].betas.numel()
         )
+    if initial is not None:
+        if initial.config() != model.config():
+            raise ValueError(
+                f"the initial regressor is {initial.config()}, the config asks for {model.config()}"
+            )
+        model.load_state_dict(initial.state_dict())
+    else:
+        model.set_normalization(*_normalization(train))
     model.to(device)
-    model.set_normalization(*_normalization(train))
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr)
     gamma_std = model.input_std[: descriptor_size(codec.code_size)]
 
@@ -372,7 +443,7 @@ def train_regressor(
             # carry the checkpoint's values
             group.update(lr=lr, weight_decay=config.weight_decay, decoupled_weight_decay=True)
         model.train()
-        sums = np.zeros(4)
+        sums = np.zeros(5)
         for step in range(steps):
             b = min(config.batch_size, crops - step * config.batch_size)
             seqs = torch.multinomial(weights, b, replacement=True, generator=generator).tolist()
@@ -388,12 +459,17 @@ def train_regressor(
             pred, _ = model(gamma, betas)
             pos, vel, acc = latent_losses(pred, target, mask)
             loss = pos + config.rho1 * vel + config.rho2 * acc
+            posed = pred.new_zeros(())
+            if config.lambda_posed > 0:
+                assert planes is not None and decode is not None
+                posed = posed_loss(pred, train, picks, decode, planes)
+                loss = loss + config.lambda_posed * posed
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             if config.grad_clip is not None:
                 torch.nn.utils.clip_grad_norm_(model.parameters(), config.grad_clip)
             optimizer.step()
-            sums += [float(v.detach()) for v in (loss, pos, vel, acc)]
+            sums += [float(v.detach()) for v in (loss, pos, vel, acc, posed)]
         model.eval()
         sums /= max(steps, 1)
         row: dict[str, Any] = {
@@ -404,8 +480,10 @@ def train_regressor(
             "train_vel": float(sums[2]),
             "train_acc": float(sums[3]),
         }
+        if config.lambda_posed > 0:
+            row["train_posed"] = float(sums[4])
         if val:
-            errors = evaluate_regressor(model, val, decode, config.encode_batch)
+            errors = evaluate_regressor(model, val, decode, config.encode_batch, planes)
             row.update({f"val_{key}": value for key, value in errors.items()})
         row["seconds"] = time.perf_counter() - tic
         history["epochs"].append(row)
