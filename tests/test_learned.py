@@ -5,6 +5,7 @@ writes the input's time codes, and a model is refused on another body or another
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -211,24 +212,28 @@ def test_shipped_model_is_the_default(
 
 @pytest.mark.parametrize("garment", ["tshirt", "dress"])
 def test_the_shipped_members_were_trained_with_the_committed_settings(garment: str) -> None:
-    """Each member of a shipped ensemble records the settings of its
-    ``examples/train/{garment}_memberN.json`` (seed, GRU width, VAE epochs, the dress's pose
-    code weighted by the garment; defaults elsewhere)."""
+    """Each member of a shipped ensemble records the settings of the last file in
+    ``examples/train/`` that its command names, the last step's (seed, GRU width, VAE epochs,
+    the dress's pose code weighted by the garment, a fine-tuning; defaults elsewhere)."""
     from usd_garment.methods.learned import shipped_model
     from usd_garment.training.pipeline import TrainSettings
 
     folder = shipped_model(garment)
     assert folder is not None
-    examples = Path(__file__).parent.parent / "examples" / "train"
-    configs = sorted(examples.glob(f"{garment}_member*"))
+    root = Path(__file__).parent.parent
     members = load_learned_model(folder).members
-    assert len(configs) == len(members) == 3
-    for member, path in zip(members, configs, strict=True):
-        settings = TrainSettings.from_dict(json.loads(path.read_text()))
+    assert len(members) == 3
+    named = set()
+    for member in members:
+        found = re.findall(r"--config (examples/train/\S+\.json)", member.info["command"])
+        assert found, member.info["command"]
+        named.add(found[-1])
+        settings = TrainSettings.from_dict(json.loads((root / found[-1]).read_text()))
         settings.set_device("cpu")
         # Read back through TrainSettings: records older than a setting get its default.
         recorded = TrainSettings.from_dict(member.info["training"]["settings"])
-        assert recorded.to_dict() == settings.to_dict(), path.name
+        assert recorded.to_dict() == settings.to_dict(), found[-1]
+    assert len(named) == 3  # one file per member
 
 
 def test_final_quality_pushes_the_learned_garment_out(body_model: BodyModel,
