@@ -258,16 +258,19 @@ def evaluate_regressor(
         for key, value in zip(sums, losses, strict=True):
             sums[key] += float(value) * q.num_frames
         frames += q.num_frames
-        if decode is not None and q.canonical is not None:
-            for z, x in zip(pred.split(decode_batch), q.canonical.split(decode_batch), strict=True):
-                decoded = torch.as_tensor(decode(z)).to("cpu", torch.float32)
-                vertex_sum += float((decoded - x).norm(dim=-1).sum())
-                vertex_count += x.shape[0] * x.shape[1]
-        if decode is not None and planes is not None and q.first_frame is not None:
-            index = torch.arange(q.first_frame, q.first_frame + q.num_frames)
-            for z, f in zip(pred.split(decode_batch), index.split(decode_batch), strict=True):
-                decoded = torch.as_tensor(decode(z)).to(planes.normal.device, torch.float32)
-                behind += int(planes.inside(f, decoded).sum())
+        planed_here = planes is not None and q.first_frame is not None
+        if decode is None or (q.canonical is None and not planed_here):
+            continue
+        for a in range(0, q.num_frames, decode_batch):
+            b = min(a + decode_batch, q.num_frames)
+            decoded = torch.as_tensor(decode(pred[a:b])).to("cpu", torch.float32)
+            if q.canonical is not None:
+                vertex_sum += float((decoded - q.canonical[a:b]).norm(dim=-1).sum())
+                vertex_count += decoded.shape[0] * decoded.shape[1]
+            if planed_here:
+                assert planes is not None and q.first_frame is not None
+                index = torch.arange(q.first_frame + a, q.first_frame + b)
+                behind += int(planes.inside(index, decoded.to(planes.normal.device)).sum())
                 planed += decoded.shape[0] * decoded.shape[1]
     out = {key: value / max(frames, 1) for key, value in sums.items()}
     if vertex_count:
