@@ -43,6 +43,10 @@ def _train_options(command: F) -> F:
                      help="The paper's VAE ablations (default: none, the full model)."),
         click.option("--epochs", "epochs", multiple=True, metavar="STAGE=N",
                      help="Epochs of a stage, e.g. --epochs vae=200 (repeatable)."),
+        click.option("--planes", "planes_path", type=click.Path(dir_okay=False, path_type=Path),
+                     default=None, help="Posed collision planes of --data for a regressor with "
+                     "lambda_posed > 0 (.npz): read when made for this set, else computed and "
+                     "written there; default: computed, not kept."),
     )):  # fmt: skip
         command = option(command)
     return command
@@ -103,6 +107,7 @@ def _run(
     config_path: Path | None,
     ablation: str | None,
     epochs: tuple[str, ...],
+    planes_path: Path | None = None,
 ) -> None:
     with user_errors():
         from usd_garment.body.io import load_body_model
@@ -128,7 +133,7 @@ def _run(
         for stage in stages:
             planes = None
             if stage == "regressor" and settings.regressor.lambda_posed > 0:
-                planes = _posed_planes(canonical, body, fields)
+                planes = _posed_planes(canonical, body, fields, planes_path)
             bar = tqdm(desc=stage, unit="epoch", disable=None)
 
             def progress(name: str, epoch: int, total: int, row: dict[str, Any]) -> None:
@@ -160,27 +165,43 @@ def _run(
             click.echo(f"wrote the model {out}")
 
 
-def _posed_planes(canonical: CanonicalSet, body: BodyModel, fields: BodyFields) -> PosedPlanes:
-    """The posed collision planes of the training and validation frames, with a progress bar
-    (one query of the posed body per frame: minutes for a few thousand frames)."""
+def _posed_planes(
+    canonical: CanonicalSet, body: BodyModel, fields: BodyFields, path: Path | None
+) -> PosedPlanes:
+    """The posed collision planes of the training and validation frames: read from ``path``
+    when it holds this set's, else computed with a progress bar (one query of the posed body
+    per frame: minutes for a few thousand frames) and written to ``path`` when given."""
     from usd_garment.eval.body_distance import body_pool
-    from usd_garment.training.posed_planes import posed_planes
+    from usd_garment.training.posed_planes import (
+        PLANE_RADIUS,
+        load_posed_planes,
+        posed_planes,
+        save_posed_planes,
+    )
 
+    if path is not None and path.is_file():
+        click.echo(f"posed planes from {path}")
+        return load_posed_planes(path, canonical, PLANE_RADIUS)
     with tqdm(desc="posed planes", unit="sequence", disable=None) as bar, body_pool(2) as pool:
 
         def progress(done: int, total: int) -> None:
             bar.total = total
             bar.update(done - bar.n)
 
-        return posed_planes(canonical, body, fields, pool=pool, progress=progress)
+        planes = posed_planes(canonical, body, fields, pool=pool, progress=progress)
+    if path is not None:
+        save_posed_planes(path, planes, canonical, PLANE_RADIUS)
+        click.echo(f"wrote the posed planes {path}")
+    return planes
 
 
 def _stage_command(name: str, stages: tuple[str, ...], help_text: str) -> None:
     @train.command(name, help=help_text)
     @_train_options
     def command(data: Path, out: Path, device: str, resume: bool, config_path: Path | None,
-                ablation: str | None, epochs: tuple[str, ...]) -> None:  # fmt: skip
-        _run(stages, data, out, device, resume, config_path, ablation, epochs)
+                ablation: str | None, epochs: tuple[str, ...],
+                planes_path: Path | None) -> None:  # fmt: skip
+        _run(stages, data, out, device, resume, config_path, ablation, epochs, planes_path)
 
 
 _stage_command("pose", ("pose",), "Train the 10-d pose code (an autoencoder of the pose).")

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -106,6 +107,23 @@ def test_train_then_dress(body_model: BodyModel, synthetic_body: BodyModel, tmp_
 
     code, output = _run(["train", "compare", model, "-o", tmp_path / "fig4.png"])
     assert code == 0 and (tmp_path / "fig4.png").is_file()
+
+    # fine-tuning in a copy: from the trained regressor, with the posed collision term, the
+    # decoder moving too (its VAE stage is written again)
+    tuned = tmp_path / "tuned"
+    shutil.copytree(model, tuned)
+    regressor = {**TINY["regressor"], "epochs": 1, "init_from": str(model), "lambda_posed": 1.0,
+                 "tune_decoder": True}  # fmt: skip
+    config.write_text(json.dumps({**TINY, "regressor": regressor}))
+    code, output = _run(["train", "regressor", "--data", data, "--out", tuned, "--config", config])
+    assert code == 0, output
+    row = json.loads((tuned / "regressor.json").read_text())["history"]["epochs"][-1]
+    assert row["train_posed"] >= 0 and row["train_vertex_mm"] > 0 and "val_posed_inside_pct" in row
+    vae_record = json.loads((tuned / "vae.json").read_text())
+    assert vae_record["tuned_with_regressor"]["init_from"] == str(model)
+    old, new = (load_learned_model(m, body_model).members[0].vae.decoder for m in (model, tuned))
+    pairs = zip(old.parameters(), new.parameters(), strict=True)
+    assert any(not torch.equal(a, b) for a, b in pairs)  # the decoder moved
 
 
 def _log_figures(model: Path) -> list[dict[str, float]]:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
@@ -12,7 +14,12 @@ from usd_garment.eval.body_distance import BodySurface, signed_distance
 from usd_garment.fields.body_fields import load_body_fields
 from usd_garment.garment.library import load_template
 from usd_garment.garment.model import GarmentModel
-from usd_garment.training.posed_planes import PosedPlanes, posed_planes
+from usd_garment.training.posed_planes import (
+    PosedPlanes,
+    load_posed_planes,
+    posed_planes,
+    save_posed_planes,
+)
 
 
 def _tshirt_set(frames: int = 3) -> CanonicalSet:
@@ -85,3 +92,19 @@ def test_plane_loss_and_inside() -> None:
     assert float(planes.loss(frames, x, 0.002)) == pytest.approx(0.005)  # ε − (−3 mm)
     assert planes.inside(frames, x).tolist() == [[True, False]]  # no plane: never inside
     assert float(planes.loss(frames, x + torch.tensor([0.01, 0, 0]), 0.002)) == 0.0
+
+
+def test_planes_are_saved_and_read_back_for_their_own_set_only(tmp_path: Path) -> None:
+    data = _tshirt_set(2)
+    planes = posed_planes(data, load_body_model(), load_body_fields(), radius=0.013)
+    path = tmp_path / "planes.npz"
+    save_posed_planes(path, planes, data, 0.013)
+    back = load_posed_planes(path, data, 0.013)
+    for a, b in ((planes.normal, back.normal), (planes.offset, back.offset)):
+        torch.testing.assert_close(a, b)
+    assert torch.equal(planes.valid, back.valid)
+    with pytest.raises(ValueError, match="another training set"):
+        load_posed_planes(path, data, 0.02)  # another radius
+    data.pose[1, 16, 2] += 0.1
+    with pytest.raises(ValueError, match="another training set"):
+        load_posed_planes(path, data, 0.013)

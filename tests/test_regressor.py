@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from dataclasses import asdict
 from pathlib import Path
 
@@ -530,3 +531,40 @@ def test_regressor_fine_tunes_from_an_initial_one() -> None:
         train_regressor(
             data, _encode, _codec(), _small_config(hidden=(8,), epochs=1), initial=first
         )
+
+
+def test_regressor_tunes_the_decoder_end_to_end() -> None:
+    """With ``tune_decoder`` the decoder's weights train too (toward the canonical targets, the
+    vertex term reported per epoch); without, the decoder given is left as it was. It needs the
+    decoder module, and cannot be resumed."""
+    data = synthetic_set(lengths=(40, 35, 30), splits=["train", "train", "validation"])
+    small = {"hidden": (16,), "epochs": 3, "crops_per_epoch": 8}
+    to_garment, to_latent = _linear_maps()
+
+    def decoder_and_decode() -> tuple[torch.nn.Linear, Callable]:
+        linear = torch.nn.Linear(LATENT, N_VERTS * 3, bias=False)
+        with torch.no_grad():  # _decode's map, as a module
+            linear.weight.copy_(to_garment @ torch.linalg.pinv(to_latent @ to_garment))
+        return linear, lambda z: linear(z).reshape(-1, N_VERTS, 3)
+
+    fixed, decode = decoder_and_decode()
+    before = fixed.weight.detach().clone()
+    _, history = train_regressor(
+        data, _encode, _codec(), _small_config(**small), decode=decode, decoder=fixed
+    )
+    torch.testing.assert_close(fixed.weight, before)
+    assert "train_vertex_mm" not in history["epochs"][-1]
+    tuned, decode = decoder_and_decode()
+    _, history = train_regressor(
+        data, _encode, _codec(), _small_config(**small, tune_decoder=True), decode=decode,
+        decoder=tuned,
+    )  # fmt: skip
+    assert not torch.allclose(tuned.weight, before)
+    assert history["epochs"][-1]["train_vertex_mm"] > 0
+    with pytest.raises(ValueError, match="decoder module"):
+        train_regressor(data, _encode, _codec(), _small_config(**small, tune_decoder=True))
+    with pytest.raises(ValueError, match="cannot be resumed"):
+        train_regressor(
+            data, _encode, _codec(), _small_config(**small, tune_decoder=True), decode=decode,
+            decoder=tuned, resume=True,
+        )  # fmt: skip

@@ -169,7 +169,8 @@ def train_stage(
 ) -> dict[str, Any]:
     """Train one stage in the run ``folder`` (created) and save it there. ``planes``: the
     posed collision planes of ``data`` (:func:`posed_planes`), for a regressor trained with
-    ``lambda_posed`` > 0.
+    ``lambda_posed`` > 0. A regressor trained with ``tune_decoder`` saves the VAE stage again
+    too, with its decoder as the training left it (its record gains ``tuned_with_regressor``).
 
     Returns:
         The stage's record: ``stage``, ``config``, ``architecture``, ``history``, ``seconds``.
@@ -210,9 +211,9 @@ def train_stage(
     else:
         config = settings.regressor
         codec, _ = load_stage(folder, "pose")
-        vae, _ = load_stage(folder, "vae")
+        vae, vae_record = load_stage(folder, "vae")
         assert isinstance(vae, GarmentVAE) and isinstance(codec, PoseCodec)
-        vae = vae.to(config.device)
+        vae = vae.to(config.device).requires_grad_(config.tune_decoder)
         initial = None
         if config.init_from is not None:
             initial, _ = load_stage(config.init_from, "regressor")
@@ -225,10 +226,14 @@ def train_stage(
             decode=vae.decode,
             planes=planes,
             initial=initial,
+            decoder=vae.decoder,
             progress=report,
             checkpoint=checkpoint,
             resume=resume,
         )
+        if config.tune_decoder:  # the decoder moved with the regressor: its stage is this one's
+            vae_record["tuned_with_regressor"] = asdict(config)
+            _save_stage(folder, "vae", vae.cpu().requires_grad_(True), vae_record)
     net = net.cpu()
     record = {
         "stage": stage,

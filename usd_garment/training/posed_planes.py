@@ -15,12 +15,15 @@ Shapes: T frames of the set, N garment vertices. Units: metres.
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import torch
 
+from usd_garment.atomic import atomic_output
 from usd_garment.body.model import BodyModel
 from usd_garment.canonical.dataset import CanonicalSet
 from usd_garment.eval.body_distance import BodyPool, BodySurface, signed_distance
@@ -114,3 +117,41 @@ def posed_planes(
         if progress is not None:
             progress(done + 1, len(chosen))
     return PosedPlanes(normal, offset, valid)
+
+
+def _fingerprint(data: CanonicalSet, radius: float) -> str:
+    """A digest of the set's frames (every 64th canonical garment, all poses, the sequence
+    bounds) and the radius: planes are reused only for the set they were made from."""
+    digest = hashlib.sha1()
+    step = max(1, len(data.canonical) // 64)
+    for array in (data.canonical[::step], data.pose, data.trans, data.frame_offsets):
+        digest.update(np.ascontiguousarray(array, dtype=np.float64).tobytes())
+    digest.update(repr((list(data.splits), radius)).encode())
+    return digest.hexdigest()
+
+
+def save_posed_planes(
+    path: str | Path, planes: PosedPlanes, data: CanonicalSet, radius: float
+) -> None:
+    """Write ``planes`` of ``data`` (made with ``radius``) to an ``.npz`` (atomically)."""
+    with atomic_output(Path(path)) as tmp, open(tmp, "wb") as f:
+        np.savez(
+            f, normal=planes.normal.numpy(), offset=planes.offset.numpy(),
+            valid=planes.valid.numpy(), fingerprint=_fingerprint(data, radius),
+        )  # fmt: skip
+
+
+def load_posed_planes(path: str | Path, data: CanonicalSet, radius: float) -> PosedPlanes:
+    """The planes saved by :func:`save_posed_planes` for ``data`` and ``radius``.
+
+    Raises:
+        ValueError: the file was made for another set or radius.
+    """
+    with np.load(Path(path)) as f:
+        if str(f["fingerprint"]) != _fingerprint(data, radius):
+            raise ValueError(f"{path}: posed planes of another training set (or radius)")
+        return PosedPlanes(
+            torch.from_numpy(f["normal"]),
+            torch.from_numpy(f["offset"]),
+            torch.from_numpy(f["valid"]),
+        )

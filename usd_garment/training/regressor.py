@@ -65,6 +65,11 @@ class RegressorTrainConfig:
         init_from: a run folder whose trained regressor (same architecture) starts the
             training, its input and output normalisation kept (fine-tuning); None: random
             initial weights.
+        tune_decoder: train the VAE's decoder with the regressor (end to end, meant for
+            fine-tuning): the loss gets λ_vertex·L_vertex, the mean distance (m) of the decoded
+            crop frames' vertices to their canonical targets. Needs the decoder module; no
+            ``resume``.
+        lambda_vertex: λ_vertex (per m), with ``tune_decoder``.
         seed: seed of the initial weights and of the crops.
         device: torch device of the training (``encode_latent``/``decode`` get tensors there).
     """
@@ -85,6 +90,8 @@ class RegressorTrainConfig:
     encode_batch: int = 256
     lambda_posed: float = 0.0
     init_from: str | None = None
+    tune_decoder: bool = False
+    lambda_vertex: float = 40.0
     seed: int = 0
     device: str = "cpu"
 
@@ -280,6 +287,27 @@ def evaluate_regressor(
     return out
 
 
+def _crop_frames(
+    sequences: list[RegressorSequence], picks: list[tuple[int, int]], length: int
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None:
+    """Of the crops ``picks`` (sequence, first frame) of ``length`` frames: the crop and frame
+    within it ``(F,)``, ``(F,)`` of each valid frame of a sequence at the set's frames, and its
+    index in the canonical set ``(F,)``; None when there is none (padding and resampled
+    sequences are left out)."""
+    rows, cols, frames = [], [], []
+    for i, (s, start) in enumerate(picks):
+        q = sequences[s]
+        if q.first_frame is None:
+            continue
+        n = min(length, q.num_frames - start)
+        rows.append(torch.full((n,), i))
+        cols.append(torch.arange(n))
+        frames.append(torch.arange(q.first_frame + start, q.first_frame + start + n))
+    if not rows:
+        return None
+    return torch.cat(rows), torch.cat(cols), torch.cat(frames)
+
+
 def posed_loss(
     pred: torch.Tensor,
     sequences: list[RegressorSequence],
@@ -290,19 +318,31 @@ def posed_loss(
     """L_posed of predicted codes ``pred`` ``(B, L, latent)`` of the crops ``picks`` (sequence,
     first frame) of ``sequences``: their decoded garments against the posed collision planes of
     their frames (m; :meth:`PosedPlanes.loss`). Padding and resampled sequences add nothing."""
-    rows, cols, frames = [], [], []
-    for i, (s, start) in enumerate(picks):
-        q = sequences[s]
-        if q.first_frame is None:
-            continue
-        n = min(pred.shape[1], q.num_frames - start)
-        rows.append(torch.full((n,), i))
-        cols.append(torch.arange(n))
-        frames.append(torch.arange(q.first_frame + start, q.first_frame + start + n))
-    if not rows:
+    index = _crop_frames(sequences, picks, pred.shape[1])
+    if index is None:
         return pred.new_zeros(())
-    x = decode(pred[torch.cat(rows), torch.cat(cols)])
-    return planes.loss(torch.cat(frames), x.to(planes.normal.device), COLLISION_EPSILON)
+    rows, cols, frames = index
+    x = decode(pred[rows, cols])
+    return planes.loss(frames, x.to(planes.normal.device), COLLISION_EPSILON)
+
+
+def vertex_loss(
+    pred: torch.Tensor,
+    sequences: list[RegressorSequence],
+    picks: list[tuple[int, int]],
+    decode: DecodeLatent,
+    canonical: np.ndarray,
+) -> torch.Tensor:
+    """L_vertex of predicted codes ``pred`` ``(B, L, latent)`` of the crops ``picks``: the mean
+    distance (m) of their decoded garments' vertices to the canonical targets ``canonical``
+    ``(T, N, 3)`` of their frames (the set's). Padding and resampled sequences add nothing."""
+    index = _crop_frames(sequences, picks, pred.shape[1])
+    if index is None:
+        return pred.new_zeros(())
+    rows, cols, frames = index
+    x = decode(pred[rows, cols])
+    target = torch.as_tensor(np.asarray(canonical[frames.numpy()], dtype=np.float32))
+    return (x - target.to(x.device)).norm(dim=-1).mean()
 
 
 @torch.no_grad()
@@ -330,6 +370,7 @@ def train_regressor(
     decode: DecodeLatent | None = None,
     planes: PosedPlanes | None = None,
     initial: GarmentRegressor | None = None,
+    decoder: torch.nn.Module | None = None,
     progress: EpochProgress | None = None,
     checkpoint: str | Path | None = None,
     resume: bool = False,
@@ -350,6 +391,8 @@ def train_regressor(
         initial: the regressor whose weights and normalisation start the training (the one
             ``config.init_from`` names); None: seeded random weights, normalisation from the
             training frames.
+        decoder: the module behind ``decode`` whose parameters train too with
+            ``config.tune_decoder`` (it is changed in place).
         progress: called after every epoch.
         checkpoint: file written after every epoch (``torch.save`` of the model, its config,
             the optimiser, the epoch, the history, the training config and the random state).
@@ -362,7 +405,8 @@ def train_regressor(
         frame counts, ``decoder_floor_mm`` (the validation vertex error of the true latents when
         ``decode`` is given) and ``epochs``, one row per epoch: ``epoch`` (1-based), ``lr``,
         ``train_loss``, ``train_pos``, ``train_vel``, ``train_acc`` (means over the epoch's
-        batches; ``train_posed`` too with λ_posed > 0), ``val_pos``, ``val_vel``, ``val_acc``,
+        batches; ``train_posed`` too with λ_posed > 0, ``train_vertex_mm`` with
+        ``tune_decoder``), ``val_pos``, ``val_vel``, ``val_acc``,
         ``val_vertex_mm`` and ``val_posed_inside_pct`` (when there are validation sequences,
         and a decoder and planes for the last two), ``seconds``.
 
@@ -380,6 +424,10 @@ def train_regressor(
         raise ValueError("weight_decay, input_noise and lambda_posed must not be negative")
     if config.lambda_posed > 0 and (planes is None or decode is None):
         raise ValueError("lambda_posed > 0 needs the posed collision planes and the decoder")
+    if config.tune_decoder and (decoder is None or decode is None):
+        raise ValueError("tune_decoder needs the decoder module and decode")
+    if config.tune_decoder and resume:
+        raise ValueError("a regressor trained with tune_decoder cannot be resumed")
     train_ids = data.split_sequences("train")
     if not train_ids:
         raise ValueError("the canonical set has no 'train' sequences")
@@ -407,7 +455,11 @@ def train_regressor(
     else:
         model.set_normalization(*_normalization(train))
     model.to(device)
-    optimizer = torch.optim.Adam(model.parameters(), lr=config.lr)
+    parameters = list(model.parameters())
+    if config.tune_decoder:
+        assert decoder is not None
+        parameters += list(decoder.parameters())
+    optimizer = torch.optim.Adam(parameters, lr=config.lr)
     gamma_std = model.input_std[: descriptor_size(codec.code_size)]
 
     lengths = [q.num_frames for q in train]
@@ -446,7 +498,7 @@ def train_regressor(
             # carry the checkpoint's values
             group.update(lr=lr, weight_decay=config.weight_decay, decoupled_weight_decay=True)
         model.train()
-        sums = np.zeros(5)
+        sums = np.zeros(6)
         for step in range(steps):
             b = min(config.batch_size, crops - step * config.batch_size)
             seqs = torch.multinomial(weights, b, replacement=True, generator=generator).tolist()
@@ -467,12 +519,17 @@ def train_regressor(
                 assert planes is not None and decode is not None
                 posed = posed_loss(pred, train, picks, decode, planes)
                 loss = loss + config.lambda_posed * posed
+            vertex = pred.new_zeros(())
+            if config.tune_decoder:
+                assert decode is not None
+                vertex = vertex_loss(pred, train, picks, decode, data.canonical)
+                loss = loss + config.lambda_vertex * vertex
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             if config.grad_clip is not None:
-                torch.nn.utils.clip_grad_norm_(model.parameters(), config.grad_clip)
+                torch.nn.utils.clip_grad_norm_(parameters, config.grad_clip)
             optimizer.step()
-            sums += [float(v.detach()) for v in (loss, pos, vel, acc, posed)]
+            sums += [float(v.detach()) for v in (loss, pos, vel, acc, posed, vertex)]
         model.eval()
         sums /= max(steps, 1)
         row: dict[str, Any] = {
@@ -485,6 +542,8 @@ def train_regressor(
         }
         if config.lambda_posed > 0:
             row["train_posed"] = float(sums[4])
+        if config.tune_decoder:
+            row["train_vertex_mm"] = 1000.0 * float(sums[5])
         if val:
             errors = evaluate_regressor(model, val, decode, config.encode_batch, planes)
             row.update({f"val_{key}": value for key, value in errors.items()})
