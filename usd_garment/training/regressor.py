@@ -287,60 +287,33 @@ def evaluate_regressor(
     return out
 
 
-def _crop_frames(
-    sequences: list[RegressorSequence], picks: list[tuple[int, int]], length: int
-) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None:
-    """Of the crops ``picks`` (sequence, first frame) of ``length`` frames: the crop and frame
-    within it ``(F,)``, ``(F,)`` of each valid frame of a sequence at the set's frames, and its
-    index in the canonical set ``(F,)``; None when there is none (padding and resampled
-    sequences are left out)."""
+def decoded_crops(
+    pred: torch.Tensor,
+    sequences: list[RegressorSequence],
+    picks: list[tuple[int, int]],
+    decode: DecodeLatent,
+) -> tuple[torch.Tensor, torch.Tensor] | None:
+    """The decoded garments ``(F, N, 3)`` (m) of the predicted codes ``pred`` ``(B, L, latent)``
+    of the crops ``picks`` (sequence, first frame) of ``sequences``, and each one's frame index
+    in the canonical set ``(F,)``; padding and resampled sequences (whose frames are not the
+    set's) are left out; None when nothing is left. Decoded once for L_posed and L_vertex."""
     rows, cols, frames = [], [], []
     for i, (s, start) in enumerate(picks):
         q = sequences[s]
         if q.first_frame is None:
             continue
-        n = min(length, q.num_frames - start)
+        n = min(pred.shape[1], q.num_frames - start)
         rows.append(torch.full((n,), i))
         cols.append(torch.arange(n))
         frames.append(torch.arange(q.first_frame + start, q.first_frame + start + n))
     if not rows:
         return None
-    return torch.cat(rows), torch.cat(cols), torch.cat(frames)
+    return decode(pred[torch.cat(rows), torch.cat(cols)]), torch.cat(frames)
 
 
-def posed_loss(
-    pred: torch.Tensor,
-    sequences: list[RegressorSequence],
-    picks: list[tuple[int, int]],
-    decode: DecodeLatent,
-    planes: PosedPlanes,
-) -> torch.Tensor:
-    """L_posed of predicted codes ``pred`` ``(B, L, latent)`` of the crops ``picks`` (sequence,
-    first frame) of ``sequences``: their decoded garments against the posed collision planes of
-    their frames (m; :meth:`PosedPlanes.loss`). Padding and resampled sequences add nothing."""
-    index = _crop_frames(sequences, picks, pred.shape[1])
-    if index is None:
-        return pred.new_zeros(())
-    rows, cols, frames = index
-    x = decode(pred[rows, cols])
-    return planes.loss(frames, x.to(planes.normal.device), COLLISION_EPSILON)
-
-
-def vertex_loss(
-    pred: torch.Tensor,
-    sequences: list[RegressorSequence],
-    picks: list[tuple[int, int]],
-    decode: DecodeLatent,
-    canonical: np.ndarray,
-) -> torch.Tensor:
-    """L_vertex of predicted codes ``pred`` ``(B, L, latent)`` of the crops ``picks``: the mean
-    distance (m) of their decoded garments' vertices to the canonical targets ``canonical``
-    ``(T, N, 3)`` of their frames (the set's). Padding and resampled sequences add nothing."""
-    index = _crop_frames(sequences, picks, pred.shape[1])
-    if index is None:
-        return pred.new_zeros(())
-    rows, cols, frames = index
-    x = decode(pred[rows, cols])
+def vertex_loss(x: torch.Tensor, frames: torch.Tensor, canonical: np.ndarray) -> torch.Tensor:
+    """L_vertex: the mean distance (m) of decoded garments ``x`` ``(F, N, 3)`` to the canonical
+    targets ``canonical`` ``(T, N, 3)`` of their frames ``frames`` ``(F,)`` (the set's)."""
     target = torch.as_tensor(np.asarray(canonical[frames.numpy()], dtype=np.float32))
     return (x - target.to(x.device)).norm(dim=-1).mean()
 
@@ -514,16 +487,20 @@ def train_regressor(
             pred, _ = model(gamma, betas)
             pos, vel, acc = latent_losses(pred, target, mask)
             loss = pos + config.rho1 * vel + config.rho2 * acc
-            posed = pred.new_zeros(())
-            if config.lambda_posed > 0:
-                assert planes is not None and decode is not None
-                posed = posed_loss(pred, train, picks, decode, planes)
-                loss = loss + config.lambda_posed * posed
-            vertex = pred.new_zeros(())
-            if config.tune_decoder:
+            posed, vertex = pred.new_zeros(()), pred.new_zeros(())
+            decoded = None
+            if config.lambda_posed > 0 or config.tune_decoder:
                 assert decode is not None
-                vertex = vertex_loss(pred, train, picks, decode, data.canonical)
-                loss = loss + config.lambda_vertex * vertex
+                decoded = decoded_crops(pred, train, picks, decode)
+            if decoded is not None:
+                x, frames = decoded
+                if config.lambda_posed > 0:
+                    assert planes is not None
+                    posed = planes.loss(frames, x.to(planes.normal.device), COLLISION_EPSILON)
+                    loss = loss + config.lambda_posed * posed
+                if config.tune_decoder:
+                    vertex = vertex_loss(x, frames, data.canonical)
+                    loss = loss + config.lambda_vertex * vertex
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             if config.grad_clip is not None:
