@@ -9,12 +9,12 @@ from pathlib import Path
 import click
 
 from usd_garment.body import load_body_model
+from usd_garment.body.fingerprint import rest_fingerprint
 from usd_garment.cli.errors import user_errors
 from usd_garment.cli.options import body_model_option
 from usd_garment.garment.library import (
     Provenance,
     body_cache_dir,
-    body_fingerprint,
     load_template,
     save_template,
     template_dir,
@@ -49,7 +49,7 @@ def drape(
     reports = []
     with user_errors():
         model = load_body_model(body_model)
-        provenance = Provenance(body_fingerprint(model), RECIPE_VERSION)
+        provenance = Provenance(rest_fingerprint(model), RECIPE_VERSION)
         folder = output or (template_dir() if body_model is None else body_cache_dir(model))
         folder.mkdir(parents=True, exist_ok=True)
         for lod in lods or tuple(LODS):

@@ -8,12 +8,12 @@ from pathlib import Path
 import click
 
 from usd_garment.body import load_body_model
+from usd_garment.body.fingerprint import rest_fingerprint
 from usd_garment.cli.drape import drape
 from usd_garment.cli.errors import user_errors
 from usd_garment.cli.options import body_model_option, json_option, lod_option
 from usd_garment.garment.library import (
     Provenance,
-    body_fingerprint,
     cache_dir,
     load_template,
     save_template,
@@ -71,7 +71,7 @@ def build(body_model: Path | None, output: Path | None) -> None:
     """Rebuild the templates of every garment and level of detail for a body model."""
     with user_errors():
         model = load_body_model(body_model)
-        provenance = Provenance(body_fingerprint(model), RECIPE_VERSION)
+        provenance = Provenance(rest_fingerprint(model), RECIPE_VERSION)
         if output is None:
             key = f"{provenance.body_fingerprint}-v{RECIPE_VERSION}"
             output = template_dir() if body_model is None else cache_dir() / key

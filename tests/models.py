@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import torch
 
+from usd_garment.body.fingerprint import model_fingerprint
 from usd_garment.body.model import BodyModel
 from usd_garment.garment.template import GarmentTemplate
 from usd_garment.generative.vae import DecoderConfig, GarmentVAE
-from usd_garment.methods.learned_model import LearnedModel, Member, body_fingerprint
+from usd_garment.methods.learned_model import LearnedModel, Member
 from usd_garment.regressor.gru import GarmentRegressor
 from usd_garment.regressor.pose_code import PoseCodec
 
@@ -33,5 +34,5 @@ def untrained_model(body: BodyModel, template: GarmentTemplate, seed: int = 0) -
             vertices=len(template.vertices),
             version="test",
             body_name=body.name,
-            body_fingerprint=body_fingerprint(body),
+            body_fingerprint=model_fingerprint(body),
         )

@@ -11,10 +11,10 @@ import trimesh
 from click.testing import CliRunner
 
 from usd_garment.body import default_body_path, load_body_model
+from usd_garment.body.fingerprint import rest_fingerprint
 from usd_garment.cli.main import main
 from usd_garment.garment.hull import Grid, inside_mesh, points_inside
 from usd_garment.garment.library import (
-    body_fingerprint,
     load_template,
     read_template,
     template_dir,
@@ -83,7 +83,7 @@ def test_committed_template(name: str, lod: str, body, rest) -> None:
     assert (template.name, template.lod) == (name, lod)
     assert template.vertices.dtype == np.float32 and template.faces.dtype == np.int32
     assert provenance.recipe_version == RECIPE_VERSION
-    assert provenance.body_fingerprint == body_fingerprint(body), "rebuild: garment build"
+    assert provenance.body_fingerprint == rest_fingerprint(body), "rebuild: garment build"
     check_template(template, rest)
 
 

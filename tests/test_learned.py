@@ -14,13 +14,14 @@ import pytest
 import torch
 from click.testing import CliRunner
 
+from usd_garment.body.fingerprint import model_fingerprint
 from usd_garment.body.model import BodyModel
 from usd_garment.canonical.dataset import CanonicalSet, save_canonical_set
 from usd_garment.cli.main import main
 from usd_garment.fields.body_fields import load_body_fields
 from usd_garment.garment.library import load_template
 from usd_garment.methods.learned import _tangent, to_frames
-from usd_garment.methods.learned_model import ModelError, body_fingerprint, load_learned_model
+from usd_garment.methods.learned_model import ModelError, load_learned_model
 from usd_garment.motion.procedural import make_motion
 from usd_garment.usd.body_layer import write_body_layer
 from usd_garment.usd.garment_read import read_garment_layer
@@ -83,7 +84,7 @@ def test_train_then_dress(body_model: BodyModel, synthetic_body: BodyModel, tmp_
     assert [line.split()[2] for line in log] == ["pose"] * 2 + ["vae"] * 2 + ["regressor"] * 2
     info = json.loads((model / "model.json").read_text())
     assert info["garment"] == "tshirt" and info["vertices"] == 1015 and info["lod"] == "low"
-    assert info["body"]["fingerprint"] == body_fingerprint(body_model)
+    assert info["body"]["fingerprint"] == model_fingerprint(body_model)
     assert info["command"].startswith("usd-garment train all")
     assert load_learned_model(model, body_model).members[0].vae.num_vertices == 1015
 

@@ -476,7 +476,9 @@ def test_regressor_regularisation_settings() -> None:
     noisy = weights(input_noise=0.3)
     assert not torch.allclose(noisy, plain)
     torch.testing.assert_close(weights(input_noise=0.3), noisy)
-    for bad in ({"weight_decay": -1.0}, {"input_noise": -0.1}):
+    negative = ({"weight_decay": -1.0}, {"input_noise": -0.1}, {"lambda_posed": -1.0},
+                {"lambda_vertex": -1.0})  # fmt: skip
+    for bad in negative:
         with pytest.raises(ValueError, match="must not be negative"):
             train_regressor(data, _encode, _codec(), _small_config(**small, **bad))
 

@@ -12,18 +12,16 @@ template keeps the garment's rest lengths.
 
 from __future__ import annotations
 
-import hashlib
 import os
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 
 import numpy as np
-import torch
 
 from usd_garment.atomic import atomic_output
+from usd_garment.body.fingerprint import rest_fingerprint
 from usd_garment.body.io import load_body_model
-from usd_garment.body.joints import NUM_BETAS
 from usd_garment.body.model import BodyModel
 from usd_garment.garment.template import GARMENT_NAMES, LODS, RECIPE_VERSION, GarmentTemplate
 
@@ -34,16 +32,6 @@ class Provenance:
 
     body_fingerprint: str
     recipe_version: int
-
-
-def body_fingerprint(body: BodyModel) -> str:
-    """A short hash of the body's rest shape (β = 0 vertices, faces) and skinning weights."""
-    with torch.no_grad():
-        rest, _ = body.shaped(torch.zeros(1, NUM_BETAS))
-    digest = hashlib.sha256()
-    for array in (rest[0], body.faces, body.weights):
-        digest.update(np.ascontiguousarray(array.numpy()).tobytes())
-    return digest.hexdigest()[:16]
 
 
 def template_dir() -> Path:
@@ -113,7 +101,7 @@ def _check(name: str, lod: str) -> None:
 
 def body_cache_dir(body: BodyModel) -> Path:
     """Cache folder of the templates of ``body``: keyed by its fingerprint and the recipe."""
-    return cache_dir() / f"{body_fingerprint(body)}-v{RECIPE_VERSION}"
+    return cache_dir() / f"{rest_fingerprint(body)}-v{RECIPE_VERSION}"
 
 
 def load_template(
@@ -138,7 +126,7 @@ def load_template(
     if body_model_path is None:
         return read_template(template_dir() / template_filename(name, lod, draped))[0]
     body = load_body_model(body_model_path)
-    provenance = Provenance(body_fingerprint(body), RECIPE_VERSION)
+    provenance = Provenance(rest_fingerprint(body), RECIPE_VERSION)
     folder = body_cache_dir(body)
     path = folder / template_filename(name, lod, draped)
     if path.is_file():
@@ -160,7 +148,7 @@ def load_template(
 def find_draped(template: GarmentTemplate, body: BodyModel) -> GarmentTemplate | None:
     """The draped version of ``template`` made on ``body`` (committed or cached), or None when
     there is none with the same triangles fitted to the same rest body."""
-    fingerprint = body_fingerprint(body)
+    fingerprint = rest_fingerprint(body)
     name = template_filename(template.name, template.lod, draped=True)
     for path in (template_dir() / name, body_cache_dir(body) / name):
         if not path.is_file():

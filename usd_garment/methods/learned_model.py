@@ -18,7 +18,6 @@ each member's).
 
 from __future__ import annotations
 
-import hashlib
 import json
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -30,6 +29,7 @@ from safetensors import SafetensorError
 from safetensors.torch import load_file, save_file
 
 from usd_garment.atomic import atomic_output
+from usd_garment.body.fingerprint import model_fingerprint
 from usd_garment.body.model import BodyModel
 from usd_garment.generative.vae import GarmentVAE
 from usd_garment.regressor.gru import GarmentRegressor
@@ -60,15 +60,6 @@ PARTS: dict[str, type[torch.nn.Module]] = {
 
 class ModelError(ValueError):
     """A model directory that cannot be used: missing, unreadable, or for another body."""
-
-
-def body_fingerprint(body: BodyModel) -> str:
-    """A short hash of what a trained model depends on in the body: rest vertices, faces, shape
-    blendshapes, skinning weights and joint regressor (float32 bytes)."""
-    digest = hashlib.sha256()
-    for tensor in (body.v_template, body.faces, body.shapedirs, body.weights, body.J_regressor):
-        digest.update(np.ascontiguousarray(tensor.detach().cpu().numpy()).tobytes())
-    return digest.hexdigest()[:16]
 
 
 @dataclass
@@ -135,7 +126,7 @@ class LearnedModel:
 
     def check_body(self, body: BodyModel) -> None:
         """Raise :class:`ModelError` unless ``body`` is the body the model was trained for."""
-        found = body_fingerprint(body)
+        found = model_fingerprint(body)
         if found != self.body_fingerprint:
             raise ModelError(
                 f"the model was trained for the body '{self.body_name}' "

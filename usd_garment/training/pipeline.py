@@ -23,6 +23,7 @@ import numpy as np
 import torch
 
 from usd_garment.atomic import atomic_output
+from usd_garment.body.fingerprint import model_fingerprint
 from usd_garment.body.model import BodyModel
 from usd_garment.canonical.dataset import CanonicalSet
 from usd_garment.fields.body_fields import BodyFields
@@ -32,7 +33,6 @@ from usd_garment.methods.learned_model import (
     PARTS,
     LearnedModel,
     Member,
-    body_fingerprint,
     save_learned_model,
 )
 from usd_garment.regressor.gru import GarmentRegressor
@@ -277,7 +277,7 @@ def assemble_model(
         vertices=int(data.template.shape[0]),
         version=settings.version,
         body_name=body.name,
-        body_fingerprint=body_fingerprint(body),
+        body_fingerprint=model_fingerprint(body),
         info={
             "ablation": settings.ablation,
             "training": {

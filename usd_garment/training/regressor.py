@@ -393,8 +393,10 @@ def train_regressor(
     config = config or RegressorTrainConfig()
     if config.crop_length < 3 or config.batch_size < 1:
         raise ValueError("crop_length must be at least 3 and batch_size at least 1")
-    if config.weight_decay < 0 or config.input_noise < 0 or config.lambda_posed < 0:
-        raise ValueError("weight_decay, input_noise and lambda_posed must not be negative")
+    if min(config.weight_decay, config.input_noise, config.lambda_posed, config.lambda_vertex) < 0:
+        raise ValueError(
+            "weight_decay, input_noise, lambda_posed and lambda_vertex must not be negative"
+        )
     if config.lambda_posed > 0 and (planes is None or decode is None):
         raise ValueError("lambda_posed > 0 needs the posed collision planes and the decoder")
     if config.tune_decoder and (decoder is None or decode is None):
