@@ -23,6 +23,9 @@ from usd_garment.garment.library import load_template
 from usd_garment.methods.learned import _tangent, to_frames
 from usd_garment.methods.learned_model import ModelError, load_learned_model
 from usd_garment.motion.procedural import make_motion
+from usd_garment.training.pose import PoseCodecTrainConfig
+from usd_garment.training.regressor import RegressorTrainConfig
+from usd_garment.training.vae import VaeTrainConfig
 from usd_garment.usd.body_layer import write_body_layer
 from usd_garment.usd.garment_read import read_garment_layer
 
@@ -125,6 +128,27 @@ def test_train_then_dress(body_model: BodyModel, synthetic_body: BodyModel, tmp_
     old, new = (load_learned_model(m, body_model).members[0].vae.decoder for m in (model, tuned))
     pairs = zip(old.parameters(), new.parameters(), strict=True)
     assert any(not torch.equal(a, b) for a, b in pairs)  # the decoder moved
+
+    # a NaN setting is refused before anything is trained or written
+    before = (tuned / "regressor.json").read_text()
+    nan = {**TINY, "regressor": {**regressor, "lambda_posed": float("nan")}}
+    config.write_text(json.dumps(nan))
+    code, output = _run(["train", "regressor", "--data", data, "--out", tuned, "--config", config])
+    assert code == 1 and "lambda_posed must be a finite number, got nan" in output
+    assert (tuned / "regressor.json").read_text() == before
+
+
+@pytest.mark.parametrize(
+    ("make", "name"),
+    [(RegressorTrainConfig, "lr"), (RegressorTrainConfig, "lambda_vertex"),
+     (RegressorTrainConfig, "grad_clip"), (VaeTrainConfig, "lambda_kl"),
+     (PoseCodecTrainConfig, "lr_decay")],
+)  # fmt: skip
+def test_training_configs_refuse_settings_that_are_not_finite(make: type, name: str) -> None:
+    for value in (float("nan"), float("inf"), -float("inf")):
+        with pytest.raises(ValueError, match=f"^{name} must be a finite number"):
+            make(**{name: value})
+    make(**{name: 0.5})  # a finite value is taken
 
 
 def _log_figures(model: Path) -> list[dict[str, float]]:

@@ -233,7 +233,7 @@ def train_stage(
         )
         if config.tune_decoder:  # the decoder moved with the regressor: its stage is this one's
             vae_record["tuned_with_regressor"] = asdict(config)
-            _save_stage(folder, "vae", vae.cpu().requires_grad_(True), vae_record)
+            _save_stage(folder, "vae", vae.cpu(), vae_record)
     net = net.cpu()
     record = {
         "stage": stage,

@@ -19,6 +19,7 @@ import torch
 from usd_garment.body.joints import NUM_JOINTS, SMPL_PARENTS
 from usd_garment.regressor.pose_code import PoseCodec, features_to_rotations, pose_to_features
 from usd_garment.training.checkpoint import resume_checkpoint, save_checkpoint
+from usd_garment.training.finite import require_finite
 
 #: ``progress(epoch, total, row)``: called after each epoch (1-based) with its history row.
 EpochProgress = Callable[[int, int, dict[str, Any]], None]
@@ -69,6 +70,7 @@ class PoseCodecTrainConfig:
     device: str = "cpu"
 
     def __post_init__(self) -> None:
+        require_finite(self)
         if self.joint_weighting not in JOINT_WEIGHTINGS:
             raise ValueError(
                 f"unknown joint_weighting '{self.joint_weighting}' ({', '.join(JOINT_WEIGHTINGS)})"

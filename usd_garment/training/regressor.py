@@ -25,6 +25,7 @@ from usd_garment.regressor.descriptor import MODEL_FPS, descriptor_size, motion_
 from usd_garment.regressor.gru import GarmentRegressor
 from usd_garment.regressor.pose_code import PoseCodec
 from usd_garment.training.checkpoint import resume_checkpoint, save_checkpoint
+from usd_garment.training.finite import require_finite
 from usd_garment.training.posed_planes import PosedPlanes
 
 #: ``progress(epoch, total, row)``: called after each epoch (1-based) with its history row.
@@ -94,6 +95,9 @@ class RegressorTrainConfig:
     lambda_vertex: float = 40.0
     seed: int = 0
     device: str = "cpu"
+
+    def __post_init__(self) -> None:
+        require_finite(self)
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> RegressorTrainConfig:

@@ -28,6 +28,7 @@ from usd_garment.generative.losses import (
     reconstruction_loss,
 )
 from usd_garment.generative.vae import LATENT_SIZE, DecoderConfig, GarmentVAE
+from usd_garment.training.finite import require_finite
 
 #: ``progress(epoch, total, history_row)``, called after each epoch (epochs count from 1).
 Progress = Callable[[int, int, dict[str, Any]], None]
@@ -105,6 +106,7 @@ class VaeTrainConfig:
         self.encoder_hidden = tuple(int(h) for h in self.encoder_hidden)
         if isinstance(self.decoder, dict):
             self.decoder = DecoderConfig.from_dict(self.decoder)
+        require_finite(self)
         if self.epochs < 0 or self.batch_size < 1 or self.self_supervised_batch < 1:
             raise ValueError("epochs must be >= 0 and batch sizes >= 1")
 
