@@ -100,6 +100,12 @@ def dataset() -> None:
     "('usd-garment motion kinds' lists them; 'hop' is not in the default).",
 )
 @click.option(
+    "--shape-per-motion",
+    is_flag=True,
+    help="Each procedural motion on SHAPES random body shapes of its own (none is the mean "
+    "shape): many shapes from few sequences (captures keep the shared shapes).",
+)
+@click.option(
     "--capture",
     "captures",
     multiple=True,
@@ -140,6 +146,7 @@ def make(
     open_shoulders: bool,
     train_only: bool,
     kinds: str,
+    shape_per_motion: bool,
     captures: tuple[str, ...],
     capture_shapes: int,
     substeps: int,
@@ -174,6 +181,7 @@ def make(
                 shape_sigma=shape_sigma, open_shoulders=open_shoulders, train_only=train_only,
                 captures=tuple(_capture(text) for text in captures),
                 capture_shapes=capture_shapes, kinds=tuple(split_list(kinds)),
+                shape_per_motion=shape_per_motion,
             )  # fmt: skip
             splits = split_list(split_names)
             manifest = make_dataset(

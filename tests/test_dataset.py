@@ -314,3 +314,29 @@ def test_a_bvh_capture_plays_whole_at_the_dataset_rate(body_model: BodyModel) ->
     assert motion.fps == 30.0 and motion.num_frames == 249  # 995 frames at 120 fps
     np.testing.assert_array_equal(motion.betas, np.asarray(spec.betas, dtype=np.float32))
     np.testing.assert_array_equal(motion.time_codes, np.arange(249))
+
+
+def test_shape_per_motion_gives_each_motion_its_own_shapes(tmp_path: Path) -> None:
+    """``shape_per_motion``: N motions × M shapes bring N × M random shapes (none is β = 0),
+    the motions are those of the shared-shape plan, a plan of more motions starts with that of
+    fewer, and captures keep the shared shapes."""
+    capture = tmp_path / "walk.usda"
+    capture.write_text("#usda 1.0\n")
+    shared = plan_sequences(DatasetConfig(motions=4, shapes=2, seed=5))
+    config = DatasetConfig(
+        motions=4, shapes=2, seed=5, shape_per_motion=True, captures=((str(capture), "test"),)
+    )
+    own = plan_sequences(config)
+    procedural = [s for s in own if not s.capture]
+    betas = {tuple(s.betas) for s in procedural}
+    assert len(betas) == 8 and all(any(b != 0.0 for b in shape) for shape in betas)
+    keys = ("name", "motion_kind", "motion_seed", "split")
+    assert [[getattr(s, k) for k in keys] for s in procedural] == [
+        [getattr(s, k) for k in keys] for s in shared
+    ]
+    more = plan_sequences(DatasetConfig(motions=6, shapes=2, seed=5, shape_per_motion=True))
+    assert [s.betas for s in more[:8]] == [s.betas for s in procedural]
+    assert [s.betas for s in own if s.capture] == [[0.0] * len(shared[0].betas)]
+    before = {k: v for k, v in DatasetConfig().to_json().items() if k != "shape_per_motion"}
+    # A manifest made before the option existed resumes as it was.
+    assert dataset_module._fixed(before) == dataset_module._fixed(DatasetConfig().to_json())

@@ -80,6 +80,9 @@ class DatasetConfig:
         train_only: every procedural motion goes to the train split (more training data for a
             model whose held-out motions come from another dataset); captures keep theirs.
         kinds: the procedural motion kinds the motions rotate through (``MOTION_KINDS``).
+        shape_per_motion: each procedural motion gets ``shapes`` body shapes of its own, all
+            drawn at random (none is β = 0): N motions bring N × M shapes, for a model that
+            must hold on shapes it never saw. Captures keep the shared shapes (β = 0 first).
     """
 
     garment: str = "tshirt"
@@ -98,6 +101,7 @@ class DatasetConfig:
     capture_shapes: int = 1
     train_only: bool = False
     kinds: tuple[str, ...] = DATASET_KINDS
+    shape_per_motion: bool = False
 
     def __post_init__(self) -> None:
         if self.garment not in GARMENT_NAMES:
@@ -181,8 +185,9 @@ def motion_splits(motions: int, seed: int) -> list[str]:
 
 def plan_sequences(config: DatasetConfig) -> list[SequenceSpec]:
     """The dataset's sequences, motion-major. Motion i has kind ``order[i mod K]`` of a seeded
-    permutation of the config's K kinds and its own seed; shape 0 is β = 0. The plan of N
-    motions × M shapes starts with that of fewer motions or shapes made with the same seed."""
+    permutation of the config's K kinds and its own seed; shape 0 is β = 0 unless each motion
+    draws its own shapes (``shape_per_motion``). The plan of N motions × M shapes starts with
+    that of fewer motions or shapes made with the same seed."""
     kinds = list(config.kinds)
     order = np.random.default_rng([config.seed, 0]).permutation(len(kinds))
     shapes = [np.zeros(NUM_BETAS, dtype=np.float32)] + [
@@ -197,7 +202,15 @@ def plan_sequences(config: DatasetConfig) -> list[SequenceSpec]:
     specs = []
     for i in range(config.motions):
         motion_seed = int(np.random.SeedSequence([config.seed, 3, i]).generate_state(1)[0])
-        for j, betas in enumerate(shapes):
+        own = (
+            [
+                random_betas(np.random.default_rng([config.seed, 4, i, j]), config.shape_sigma)
+                for j in range(config.shapes)
+            ]
+            if config.shape_per_motion
+            else shapes
+        )
+        for j, betas in enumerate(own):
             specs.append(
                 SequenceSpec(
                     name=f"m{i:02d}_s{j}",
@@ -292,10 +305,12 @@ def run_sequence(folder: str, config: DatasetConfig, spec: SequenceSpec) -> dict
 def _fixed(config: dict[str, Any]) -> dict[str, Any]:
     """A config without the motion, shape and capture lists: the plan of more motions, shapes or
     captures starts with that of fewer, so a dataset can be resumed with more (a manifest made
-    before ``train_only`` or ``kinds`` existed had none: it has the defaults)."""
+    before ``train_only``, ``kinds`` or ``shape_per_motion`` existed had none: it has the
+    defaults)."""
+    defaults = {"train_only": False, "kinds": list(DATASET_KINDS), "shape_per_motion": False}
     return {
         k: v
-        for k, v in {"train_only": False, "kinds": list(DATASET_KINDS), **config}.items()
+        for k, v in {**defaults, **config}.items()
         if k not in ("motions", "shapes", "captures", "capture_shapes")
     }
 
