@@ -183,11 +183,7 @@ def test_training_on_cuda_is_the_training_on_the_cpu(
             f"--device {device} --config {config}"
         )
     assert len(figures["cuda"]) == len(figures["cpu"]) == 6
-    for cpu, cuda in zip(figures["cpu"], figures["cuda"], strict=True):
-        assert cpu.keys() == cuda.keys()
-        for key in cpu:
-            atol = 0.05 if key.endswith("_pct") else 1e-6
-            assert cuda[key] == pytest.approx(cpu[key], rel=0.02, abs=atol), key
+    _assert_same_figures(figures["cpu"], figures["cuda"])
     body = tmp_path / "walk.usda"
     write_body_layer(body, make_motion("walk", 5, 30.0, seed=5, body=body_model), body_model)
     points = {}
@@ -198,6 +194,44 @@ def test_training_on_cuda_is_the_training_on_the_cpu(
         assert code == 0, output
         points[device] = read_garment_layer(out)[0]
     np.testing.assert_allclose(points["cuda"], points["cpu"], atol=2e-3)
+
+
+def _assert_same_figures(cpu: list[dict[str, float]], cuda: list[dict[str, float]]) -> None:
+    """Each logged figure within 2 % (shares of vertices within 0.05 points)."""
+    for cpu_row, cuda_row in zip(cpu, cuda, strict=True):
+        assert cpu_row.keys() == cuda_row.keys()
+        for key in cpu_row:
+            atol = 0.05 if key.endswith("_pct") else 1e-6
+            assert cuda_row[key] == pytest.approx(cpu_row[key], rel=0.02, abs=atol), key
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
+def test_fine_tuning_on_cuda_is_the_fine_tuning_on_the_cpu(
+    body_model: BodyModel, synthetic_body: BodyModel, tmp_path: Path
+) -> None:
+    """The end-to-end fine-tune (the posed collision term on the CPU's planes, the decoder
+    moving) of one CPU-trained model, run with ``--device cuda``, logs what the CPU's logs."""
+    if body_model is synthetic_body:
+        pytest.skip("needs the embedded default body and its fields")
+    data, config, model = tmp_path / "set.npz", tmp_path / "tiny.json", tmp_path / "model"
+    tiny_canonical_set(body_model, data)
+    config.write_text(json.dumps(TINY))
+    code, output = _run(["train", "all", "--data", data, "--out", model, "--config", config])
+    assert code == 0, output
+    regressor = {**TINY["regressor"], "init_from": str(model), "lambda_posed": 1.0,
+                 "tune_decoder": True}  # fmt: skip
+    config.write_text(json.dumps({**TINY, "regressor": regressor}))
+    figures = {}
+    for device in ("cpu", "cuda"):
+        tuned = tmp_path / device
+        shutil.copytree(model, tuned)
+        code, output = _run(["train", "regressor", "--data", data, "--out", tuned, "--config",
+                             config, "--device", device])  # fmt: skip
+        assert code == 0, output
+        rows = json.loads((tuned / "regressor.json").read_text())["history"]["epochs"]
+        figures[device] = [{k: v for k, v in r.items() if k not in ("seconds", "lr")} for r in rows]
+        assert "val_posed_inside_pct" in figures[device][-1]
+    _assert_same_figures(figures["cpu"], figures["cuda"])
 
 
 def test_latents_return_to_the_input_frames() -> None:
