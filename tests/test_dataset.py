@@ -27,6 +27,7 @@ from usd_garment.training import dataset as dataset_module
 from usd_garment.training.dataset import (
     MANIFEST_NAME,
     DatasetConfig,
+    SequenceSpec,
     make_dataset,
     plan_sequences,
     read_manifest,
@@ -172,14 +173,21 @@ def test_a_set_of_captures_alone_has_no_procedural_motion(tmp_path: Path) -> Non
         DatasetConfig(motions=0)
 
 
-def test_train_only_puts_every_procedural_motion_in_train(tmp_path: Path) -> None:
+def _plans(
+    tmp_path: Path, motions: int, seed: int, **flag: bool
+) -> tuple[list[SequenceSpec], list[SequenceSpec]]:
+    """The plan of ``motions`` × 2 shapes, and the same with ``flag`` set and a test capture."""
     capture = tmp_path / "walk.usda"
     capture.write_text("#usda 1.0\n")
-    held = plan_sequences(DatasetConfig(motions=10, shapes=2, seed=1))
+    plain = plan_sequences(DatasetConfig(motions=motions, shapes=2, seed=seed))
     config = DatasetConfig(
-        motions=10, shapes=2, seed=1, train_only=True, captures=((str(capture), "test"),)
+        motions=motions, shapes=2, seed=seed, captures=((str(capture), "test"),), **flag
     )
-    extra = plan_sequences(config)
+    return plain, plan_sequences(config)
+
+
+def test_train_only_puts_every_procedural_motion_in_train(tmp_path: Path) -> None:
+    held, extra = _plans(tmp_path, 10, 1, train_only=True)
     assert {s.split for s in extra if not s.capture} == {"train"}
     assert [s.split for s in extra if s.capture] == ["test"]
     assert {s.split for s in held} == {"train", "validation", "test"}
@@ -320,13 +328,7 @@ def test_shape_per_motion_gives_each_motion_its_own_shapes(tmp_path: Path) -> No
     """``shape_per_motion``: N motions × M shapes bring N × M random shapes (none is β = 0),
     the motions are those of the shared-shape plan, a plan of more motions starts with that of
     fewer, and captures keep the shared shapes."""
-    capture = tmp_path / "walk.usda"
-    capture.write_text("#usda 1.0\n")
-    shared = plan_sequences(DatasetConfig(motions=4, shapes=2, seed=5))
-    config = DatasetConfig(
-        motions=4, shapes=2, seed=5, shape_per_motion=True, captures=((str(capture), "test"),)
-    )
-    own = plan_sequences(config)
+    shared, own = _plans(tmp_path, 4, 5, shape_per_motion=True)
     procedural = [s for s in own if not s.capture]
     betas = {tuple(s.betas) for s in procedural}
     assert len(betas) == 8 and all(any(b != 0.0 for b in shape) for shape in betas)
