@@ -228,8 +228,7 @@ def test_fine_tuning_on_cuda_is_the_fine_tuning_on_the_cpu(
         code, output = _run(["train", "regressor", "--data", data, "--out", tuned, "--config",
                              config, "--device", device])  # fmt: skip
         assert code == 0, output
-        rows = json.loads((tuned / "regressor.json").read_text())["history"]["epochs"]
-        figures[device] = [{k: v for k, v in r.items() if k not in ("seconds", "lr")} for r in rows]
+        figures[device] = _log_figures(tuned)  # the copied run's lines, then the fine-tune's
         assert "val_posed_inside_pct" in figures[device][-1]
     _assert_same_figures(figures["cpu"], figures["cuda"])
 
