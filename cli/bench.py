@@ -22,7 +22,7 @@ from usd_garment.garment.template import GARMENT_NAMES, LODS
 from usd_garment.methods import available_methods
 from usd_garment.methods.budget import BUDGET_FILE, budget_table, save_budget
 from usd_garment.methods.learned import LEARNED_METHODS, LearnedMethod, shipped_model
-from usd_garment.methods.learned_model import load_learned_model
+from usd_garment.methods.learned_model import load_learned_model, model_identity
 from usd_garment.methods.simulation import SimulationMethod
 from usd_garment.training.dataset import dataset_layers
 
@@ -251,9 +251,11 @@ def bench(
     context = click.get_current_context()
     options = {k: _plain(v) for k, v in context.params.items()}
     machine = f"{platform.machine()}, {os.cpu_count()} cores"
-    save_budget(output / BUDGET_FILE, budget_table(rows),
-                {**source, "command": context.command_path, "options": options,
-                 "machine": machine})  # fmt: skip
+    measured = {**source, "command": context.command_path, "options": options, "machine": machine}
+    shipped = [m.model for m in methods if m.label in LEARNED_METHODS and m.model is not None]
+    if shipped:  # the table's learned entries are the shipped model's
+        measured["model"] = model_identity(shipped[0])
+    save_budget(output / BUDGET_FILE, budget_table(rows), measured)
     plot_chart(rows, output / "chart.png", f"{garment}: {len(cases)} input(s), {wall:.0f} s")
     plot_collision_curves(rows, output / "collisions.png")
     click.echo(chart_table(rows))

@@ -24,6 +24,7 @@ from usd_garment.eval.bench import (
 )
 from usd_garment.methods.budget import load_budget
 from usd_garment.methods.learned import shipped_model
+from usd_garment.methods.learned_model import model_identity
 from usd_garment.motion.procedural import make_motion
 from usd_garment.usd.body_layer import write_body_layer
 
@@ -95,6 +96,7 @@ def test_bench_command_writes_table_chart_and_curves(tmp_path: Path, walk: Path)
         assert e.error_mm == pytest.approx(float(rows[e.method, e.lod]["reference_mm"]), abs=1e-4)
     source = json.loads((report / "budget.json").read_text())["source"]
     assert source["command"].endswith("bench") and source["options"]["lods"] == ["low", "medium"]
+    assert "model" not in source  # no learned entry: no model to name
 
 
 def test_a_failing_method_is_a_row_not_the_end(tmp_path: Path, walk: Path) -> None:
@@ -111,13 +113,15 @@ def test_a_failing_method_is_a_row_not_the_end(tmp_path: Path, walk: Path) -> No
 def test_a_model_is_benched_with_each_model_method(tmp_path: Path, walk: Path) -> None:
     model = shipped_model("tshirt")
     assert model is not None
-    args = ["bench", str(walk), "--method", "lbs", "--lod", "low", "--model", f"cand={model}",
-            "--model-method", "learned", "--model-method", "learned+canonical",
-            "-o", str(tmp_path / "r")]  # fmt: skip
+    args = ["bench", str(walk), "--method", "learned", "--method", "lbs", "--lod", "low",
+            "--model", f"cand={model}", "--model-method", "learned", "--model-method",
+            "learned+canonical", "-o", str(tmp_path / "r")]  # fmt: skip
     result = CliRunner().invoke(main, args)
     assert result.exit_code == 0, result.output
     rows = json.loads((tmp_path / "r" / "report.json").read_text())["rows"]
     assert [(r["label"], r["method"], r["lod"]) for r in rows] == [
+        ("learned", "learned", "high"),  # the shipped model
+        ("learned", "learned", "low"),
         ("cand", "learned", "high"),
         ("cand", "learned", "low"),  # carried down to the --lod asked for
         ("cand+canonical", "learned+canonical", "high"),
@@ -125,6 +129,9 @@ def test_a_model_is_benched_with_each_model_method(tmp_path: Path, walk: Path) -
         ("lbs", "lbs", "low"),
     ]
     assert not any(r["error"] for r in rows)
+    # The error table names the model its learned entries were measured with: the shipped one.
+    source = json.loads((tmp_path / "r" / "budget.json").read_text())["source"]
+    assert source["model"] == model_identity(model)
 
 
 @pytest.mark.parametrize(

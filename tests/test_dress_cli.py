@@ -165,6 +165,7 @@ def test_error_budget_picks_the_fastest_method_that_meets_it(
 ) -> None:
     from usd_garment.methods.budget import BUDGET_FILE, BudgetEntry, save_budget
     from usd_garment.methods.learned import shipped_model
+    from usd_garment.methods.learned_model import model_identity
 
     model = tmp_path / "model"
     shutil.copytree(shipped_model("tshirt"), model)
@@ -189,6 +190,17 @@ def test_error_budget_picks_the_fastest_method_that_meets_it(
         tmp_path, body_layer,
     )  # fmt: skip
     assert "no method meets an error of 5 mm" in message and "learned at high, 16.9 mm" in message
+    # A table names the model it was measured with: the model's own is read, another refused.
+    save_budget(model / BUDGET_FILE, table, {"command": "test", "model": model_identity(model)})
+    assert _run(["dress", body_layer, "-o", tmp_path / "own.usdc", "--model", model,
+                 "--error-budget", 20])[0] == 0  # fmt: skip
+    other = {"version": "5", "weights": "0123456789abcdef"}
+    save_budget(model / BUDGET_FILE, table, {"command": "test", "model": other})
+    message = _assert_clean_failure(
+        ["dress", body_layer, "-o", tmp_path / "b.usdc", "--model", model, "--error-budget", 20],
+        tmp_path, body_layer,
+    )  # fmt: skip
+    assert "measured with another model (version 5, weights 0123456789abcdef)" in message
     both = _run(["dress", body_layer, "-o", tmp_path / "x.usdc", "--error-budget", 20, "--lod",
                  "low"])  # fmt: skip
     assert both[0] == 2 and "give --error-budget or --lod, not both" in both[1] + both[2]

@@ -5,7 +5,9 @@ millimetres.
 The figures come from a bench report (``budget.json`` in the report folder, one entry per method
 × level of detail: frame-weighted means over the inputs that have a simulated reference); a
 model directory ships the table measured with its model, so ``dress --error-budget MM`` picks
-from it without running anything.
+from it without running anything. A table whose learned entries were measured with a model
+names it (``source["model"]``: version and weights digest); a model directory whose weights are
+not those is refused, so a retrained model never picks from its predecessor's figures.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from usd_garment.atomic import atomic_output
 from usd_garment.eval.bench import REFERENCE_LABEL, BenchRow, chart_points
 from usd_garment.methods import available_methods
 from usd_garment.methods.learned import shipped_model
+from usd_garment.methods.learned_model import model_identity
 
 #: The table's file name, in a bench report folder and in a model directory.
 BUDGET_FILE = "budget.json"
@@ -78,7 +81,11 @@ def load_budget(path: str | Path) -> list[BudgetEntry]:
     Raises:
         BudgetError: missing, unreadable or of another version.
     """
-    path = Path(path)
+    return _read_table(Path(path))[0]
+
+
+def _read_table(path: Path) -> tuple[list[BudgetEntry], dict[str, Any]]:
+    """The entries and the source of the table at ``path`` (see :func:`load_budget`)."""
     if not path.is_file():
         raise BudgetError(
             f"{path}: no error table (make one with 'usd-garment bench ... -o DIR': "
@@ -86,13 +93,15 @@ def load_budget(path: str | Path) -> list[BudgetEntry]:
         )
     try:
         data = json.loads(path.read_text())
-        version, rows = data.get("version"), data["entries"]
+        version, rows, source = data.get("version"), data["entries"], data.get("source", {})
         entries = [BudgetEntry(**e) for e in rows] if version == FORMAT_VERSION else None
+        if not isinstance(source, dict):
+            raise TypeError("source is not a mapping")
     except (ValueError, KeyError, TypeError, AttributeError) as exc:
         raise BudgetError(f"{path}: not an error table ({exc})") from exc
     if entries is None:
         raise BudgetError(f"{path}: error table version {version} not supported")
-    return entries
+    return entries, source
 
 
 def pick(entries: Sequence[BudgetEntry], error_mm: float) -> BudgetEntry:
@@ -118,9 +127,19 @@ def pick_for_budget(garment: str, model: str | Path | None, error_mm: float) -> 
     ``garment``).
 
     Raises:
-        BudgetError: no model, no table, or nothing meets the budget.
+        BudgetError: no model, no table, a table measured with other weights than the model's,
+            or nothing meets the budget.
     """
     folder = Path(model) if model is not None else shipped_model(garment)
     if folder is None:
         raise BudgetError(f"no model ships for the garment '{garment}', so no error table")
-    return pick(load_budget(folder / BUDGET_FILE), error_mm)
+    entries, source = _read_table(folder / BUDGET_FILE)
+    measured, present = source.get("model"), model_identity(folder)
+    if isinstance(measured, dict) and measured.get("weights") != present["weights"]:
+        raise BudgetError(
+            f"{folder / BUDGET_FILE} was measured with another model (version "
+            f"{measured.get('version')}, weights {measured.get('weights')}), not this one "
+            f"(version {present['version']}, weights {present['weights']}): bench it again "
+            f"('usd-garment bench ... -o DIR') and copy DIR/{BUDGET_FILE} into {folder}"
+        )
+    return pick(entries, error_mm)

@@ -18,6 +18,7 @@ each member's).
 
 from __future__ import annotations
 
+import hashlib
 import json
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -174,6 +175,23 @@ def save_learned_model(
     }
     with atomic_output(path / CONFIG_NAME) as tmp:
         tmp.write_text(json.dumps(config, indent=1) + "\n", encoding="utf-8")
+
+
+def model_identity(path: str | Path) -> dict[str, str]:
+    """What names the trained weights of the model directory ``path``: its ``version`` and
+    ``weights``, the first 16 hex digits of the SHA-256 of its weights file (two models with the
+    same version string but other weights differ there).
+
+    Raises:
+        ModelError: not a model directory, or unreadable.
+    """
+    path = Path(path)
+    try:
+        version = str(json.loads((path / CONFIG_NAME).read_text(encoding="utf-8"))["version"])
+        digest = hashlib.sha256((path / WEIGHTS_NAME).read_bytes()).hexdigest()[:16]
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ModelError(f"{path}: not a readable model directory ({exc})") from None
+    return {"version": version, "weights": digest}
 
 
 def load_learned_model(path: str | Path, body: BodyModel | None = None) -> LearnedModel:
