@@ -134,12 +134,14 @@ def pick_for_budget(garment: str, model: str | Path | None, error_mm: float) -> 
     if folder is None:
         raise BudgetError(f"no model ships for the garment '{garment}', so no error table")
     entries, source = _read_table(folder / BUDGET_FILE)
-    measured, present = source.get("model"), model_identity(folder)
-    if isinstance(measured, dict) and measured.get("weights") != present["weights"]:
-        raise BudgetError(
-            f"{folder / BUDGET_FILE} was measured with another model (version "
-            f"{measured.get('version')}, weights {measured.get('weights')}), not this one "
-            f"(version {present['version']}, weights {present['weights']}): bench it again "
-            f"('usd-garment bench ... -o DIR') and copy DIR/{BUDGET_FILE} into {folder}"
-        )
+    measured = source.get("model")  # absent from tables made before the bench named its model
+    if isinstance(measured, dict):
+        present = model_identity(folder)
+        if measured.get("weights") != present["weights"]:
+            raise BudgetError(
+                f"{folder / BUDGET_FILE} was measured with another model (version "
+                f"{measured.get('version')}, weights {measured.get('weights')}), not this one "
+                f"(version {present['version']}, weights {present['weights']}): bench it again "
+                f"('usd-garment bench ... -o DIR') and copy DIR/{BUDGET_FILE} into {folder}"
+            )
     return pick(entries, error_mm)
