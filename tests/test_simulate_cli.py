@@ -103,6 +103,7 @@ def test_bad_frames_are_kept_and_flagged_unless_strict(
     settings = json.loads(read_garment(garment_meshes(stage)[0])["solverSettings"])
     assert settings["status"] == "ok" and settings["bad_frames"] == 3
     assert settings["per_frame"]["bad"] == [1, 1, 1] and settings["lead_in_bad_frames"] == 2
+    assert read_garment_layer(out)[2].flagged.tolist() == [True] * 3  # what training skips
     strict_out = tmp_path / "strict.usdc"
     code, output = _run(["simulate", body_path, "-o", strict_out, "--lod", "low", "--strict"])
     assert code != 0

@@ -3,6 +3,7 @@ canonical frame (Y-up, metres), value clips included: for evaluation and round t
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,6 +25,9 @@ class GarmentLayerInfo:
         time_codes_per_second: the layer's timeCodesPerSecond.
         method: ``garment:method``; empty if not authored.
         canonical_to_local: ``(4, 4)`` row-vector matrix, canonical frame → mesh local space.
+        flagged: ``(T,)`` bool, the frames a simulation kept although they failed its checks
+            (``per_frame.bad`` of ``garment:solverSettings``); all False where the layer records
+            no per-frame quality (another method).
     """
 
     path: Path
@@ -32,6 +36,7 @@ class GarmentLayerInfo:
     time_codes_per_second: float
     method: str
     canonical_to_local: np.ndarray
+    flagged: np.ndarray
 
 
 def garment_meshes(stage: Usd.Stage) -> list[Usd.Prim]:
@@ -53,7 +58,8 @@ def read_garment_layer(
     one garment of the layer (``garment``: the mesh name; None if the layer has one garment).
 
     Raises:
-        UsdInputError: not a readable layer, no such garment, or no time samples.
+        UsdInputError: not a readable layer, no such garment, no time samples, or a per-frame
+            quality record of another length than the samples.
     """
     path = Path(path)
     if not path.is_file():
@@ -85,6 +91,30 @@ def read_garment_layer(
     method_attr = prim.GetAttribute("garment:method")
     method = str(method_attr.Get()) if method_attr and method_attr.HasAuthoredValue() else ""
     info = GarmentLayerInfo(
-        path, str(prim.GetPath()), times, stage.GetTimeCodesPerSecond(), method, matrix
-    )
+        path, str(prim.GetPath()), times, stage.GetTimeCodesPerSecond(), method, matrix,
+        _flagged_frames(prim, len(times), path),
+    )  # fmt: skip
     return points, faces, info
+
+
+def _flagged_frames(prim: Usd.Prim, frames: int, path: Path) -> np.ndarray:
+    """``(frames,)`` bool: ``per_frame.bad`` of the mesh's ``garment:solverSettings`` (JSON), all
+    False when it records none.
+
+    Raises:
+        UsdInputError: the record has another length than ``frames``.
+    """
+    attr = prim.GetAttribute("garment:solverSettings")
+    text = str(attr.Get()) if attr and attr.HasAuthoredValue() else ""
+    try:
+        bad = json.loads(text).get("per_frame", {}).get("bad")
+    except (ValueError, AttributeError):  # not JSON, or JSON that is not an object
+        bad = None
+    if bad is None:
+        return np.zeros(frames, dtype=bool)
+    if len(bad) != frames:
+        raise UsdInputError(
+            f"{path}: {prim.GetPath()} records the quality of {len(bad)} frames for {frames} "
+            "time samples"
+        )
+    return np.asarray(bad, dtype=bool)
