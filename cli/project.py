@@ -77,7 +77,8 @@ from usd_garment.training.dataset import dataset_layers
     "--update",
     is_flag=True,
     help="If OUTPUT exists, keep its sequences and project only the layers it lacks (a dataset "
-    "that grew, a simulation run that finished later).",
+    "that grew, a simulation run that finished later); a set projected before flagged frames "
+    "were recorded gets them from its layers.",
 )
 @body_model_option
 @fields_option
@@ -126,4 +127,11 @@ def project(
         f"{frames / max(seconds, 1e-9):.2f} frames/s per worker); reprojection error mean "
         f"{mean_mm:.2f} mm, max {max_mm:.2f} mm"
     )
+    if data.flagged is None:
+        click.echo("frames the simulation flagged: not recorded (a layer of the set is gone)")
+    else:
+        flagged = int(np.sum(data.flagged))
+        sequences = sum(bool(np.any(data.flagged[data.sequence(s)]))
+                        for s in range(data.num_sequences))  # fmt: skip
+        click.echo(f"frames the simulation flagged: {flagged} in {sequences} sequence(s)")
     click.echo(f"wrote {output}")

@@ -32,7 +32,9 @@ from usd_garment.methods.learned_model import (
 )
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.usd.body_layer import write_body_layer
+from usd_garment.usd.errors import UsdInputError
 from usd_garment.usd.garment_layer import GarmentFrames, write_garment_layer
+from usd_garment.usd.garment_read import read_garment_layer
 from usd_garment.usd.read import read_smpl_motion
 
 FRAMES = 3
@@ -132,14 +134,15 @@ def test_baselines_invert_their_own_skinning(body, template, motion, baseline):
     np.testing.assert_allclose(again, posed, atol=1e-5)
 
 
-def _write_inputs(tmp_path, body, template, motion, points):
-    """A body layer and a garment layer holding ``points`` ``(T, N, 3)``."""
+def _write_inputs(tmp_path, body, template, motion, points, settings="", name="sim.usdc"):
+    """A body layer and a garment layer ``name`` holding ``points`` ``(T, N, 3)`` and the
+    solver ``settings``."""
     betas, pose, trans = motion
-    body_path, sim_path = tmp_path / "body.usda", tmp_path / "sim.usdc"
+    body_path, sim_path = tmp_path / "body.usda", tmp_path / name
     write_body_layer(body_path, SmplMotion(betas, pose, trans, fps=30.0), body, with_mesh=False)
     read_motion, info = read_smpl_motion(body_path, body)
     garment = GarmentFrames("tshirt", "tshirt", template.faces, template.uvs, points, "sim",
-                            "tshirt", "1", body.name)  # fmt: skip
+                            "tshirt", "1", body.name, settings)  # fmt: skip
     write_garment_layer(sim_path, info, [garment], read_motion.time_codes)
     return body_path, sim_path
 
@@ -264,6 +267,47 @@ def test_project_update_appends_only_new_layers(tmp_path, body, template, motion
     result = CliRunner().invoke(main, ["project", str(first), "--update", *other])
     assert result.exit_code != 0 and "projection settings" in result.output, result.output
     assert "Traceback" not in result.output and out.read_bytes() == written
+
+
+def test_project_records_the_frames_the_simulation_flagged(tmp_path, body, template, motion):
+    """The canonical set keeps each frame's flag from its layer's per-frame quality (none for a
+    layer that records none); ``--update`` gives a set projected before flags were kept its
+    flags from its layers, and leaves it without when a layer is gone."""
+    rest = np.repeat(template.vertices[None], FRAMES, axis=0) * np.float32(1.01)
+    flagged = json.dumps({"per_frame": {"bad": [0, 1, 0]}})
+    body_path, first = _write_inputs(tmp_path, body, template, motion, rest, flagged)
+    _, second = _write_inputs(tmp_path, body, template, motion, rest, "{}", "second.usdc")
+    out = tmp_path / "canonical.npz"
+    common = ["--body", str(body_path), "-o", str(out), "--lod", "low", "--iterations", "0"]
+    result = CliRunner().invoke(main, ["project", str(first), str(second), *common])
+    assert result.exit_code == 0, result.output
+    assert "frames the simulation flagged: 1 in 1 sequence(s)" in result.output
+    data = load_canonical_set(out)
+    assert data.flags().tolist() == [False, True, False, False, False, False]
+    data.flagged = None  # as projected before flags were kept
+    save_canonical_set(out, data)
+    assert load_canonical_set(out).flagged is None
+    result = CliRunner().invoke(main, ["project", str(first), "--update", *common])
+    assert result.exit_code == 0, result.output
+    assert load_canonical_set(out).flags().tolist() == [False, True, False, False, False, False]
+    save_canonical_set(out, data)
+    second.unlink()
+    result = CliRunner().invoke(main, ["project", str(first), "--update", *common])
+    assert result.exit_code == 0 and "flagged: not recorded" in result.output, result.output
+    with pytest.raises(ValueError, match="project its layers again"):
+        load_canonical_set(out).flags()
+
+
+def test_a_layer_whose_quality_record_does_not_match_its_samples_is_refused(
+    tmp_path, body, template, motion
+):
+    rest = np.repeat(template.vertices[None], FRAMES, axis=0)
+    settings = json.dumps({"per_frame": {"bad": [0, 1]}})
+    _, sim = _write_inputs(tmp_path, body, template, motion, rest, settings)
+    with pytest.raises(UsdInputError, match="quality of 2 frames for 3 time samples"):
+        read_garment_layer(sim)
+    _, sim = _write_inputs(tmp_path, body, template, motion, rest, "not json", "other.usdc")
+    assert read_garment_layer(sim)[2].flagged.tolist() == [False] * FRAMES
 
 
 def _floor_set(template, motion, sim_path, canonical_a, canonical_b):

@@ -10,6 +10,8 @@ Arrays (S sequences, T = ΣT_s frames in all, N garment vertices, F triangles):
     sources ``(S,)`` str: the simulated layer each sequence came from.
     splits ``(S,)`` str: the split of each sequence ("train", "validation" or "test").
     metadata: a JSON string (garment, lod, body model, projection settings, package version).
+    flagged ``(T,)`` bool: frames the simulation kept although they failed its checks (the
+        garment layer's ``per_frame.bad``); absent from sets projected before it was recorded.
 """
 
 from __future__ import annotations
@@ -44,6 +46,7 @@ class CanonicalSet:
     sources: list[str] = field(default_factory=list)
     splits: list[str] = field(default_factory=list)
     metadata: dict[str, Any] = field(default_factory=dict)
+    flagged: np.ndarray | None = None
 
     @property
     def num_sequences(self) -> int:
@@ -67,6 +70,19 @@ class CanonicalSet:
     def split_sequences(self, split: str) -> list[int]:
         """Indices of the sequences in ``split``."""
         return [s for s, name in enumerate(self.splits) if name == split]
+
+    def flags(self) -> np.ndarray:
+        """``(T,)`` bool: the frames the simulation flagged (see :attr:`flagged`).
+
+        Raises:
+            ValueError: the set has no record of them (projected before it was kept).
+        """
+        if self.flagged is None:
+            raise ValueError(
+                "the canonical set has no record of the frames the simulation flagged (it was "
+                "projected before that was kept): project its layers again"
+            )
+        return np.asarray(self.flagged, dtype=bool)
 
 
 def concat_canonical_sets(first: CanonicalSet, second: CanonicalSet) -> CanonicalSet:
@@ -96,12 +112,16 @@ def concat_canonical_sets(first: CanonicalSet, second: CanonicalSet) -> Canonica
         sources=[*first.sources, *second.sources],
         splits=[*first.splits, *second.splits],
         metadata=second.metadata,
+        flagged=None
+        if first.flagged is None or second.flagged is None
+        else np.concatenate([first.flagged, second.flagged]),
     )
 
 
 def save_canonical_set(path: str | Path, data: CanonicalSet) -> None:
     """Write ``data`` to ``path`` atomically (``.npz``)."""
     arrays = {name: getattr(data, name) for name in _ARRAYS}
+    flags = {} if data.flagged is None else {"flagged": np.asarray(data.flagged, dtype=bool)}
     with atomic_output(path) as tmp, open(tmp, "wb") as handle:
         np.savez_compressed(
             handle,
@@ -112,6 +132,7 @@ def save_canonical_set(path: str | Path, data: CanonicalSet) -> None:
             sources=np.array(data.sources, dtype=str),
             splits=np.array(data.splits, dtype=str),
             metadata=np.array(json.dumps(data.metadata)),
+            **flags,
         )  # fmt: skip
 
 
@@ -131,6 +152,9 @@ def load_canonical_set(path: str | Path) -> CanonicalSet:
             sources = [str(s) for s in npz["sources"]]
             splits = [str(s) for s in npz["splits"]]
             metadata = json.loads(str(npz["metadata"]))
+            flagged = npz["flagged"] if "flagged" in npz.files else None
     except (OSError, KeyError, ValueError) as exc:
         raise ValueError(f"{path}: not a canonical training set file ({exc})") from exc
-    return CanonicalSet(**values, sources=sources, splits=splits, metadata=metadata)
+    return CanonicalSet(
+        **values, sources=sources, splits=splits, metadata=metadata, flagged=flagged
+    )

@@ -39,11 +39,14 @@ class SequenceInput:
         source: the simulated garment layer.
         points: ``(T, N, 3)`` simulated garment (canonical frame, m).
         motion: the body motion at the same time codes.
+        flagged: ``(T,)`` bool, the frames the simulation flagged (kept though they failed its
+            checks).
     """
 
     source: Path
     points: np.ndarray
     motion: SmplMotion
+    flagged: np.ndarray
 
 
 def match_frames(points: np.ndarray, garment_times: np.ndarray, motion: SmplMotion) -> SmplMotion:
@@ -134,7 +137,10 @@ def project_layers(
             each); 1 projects in this process.
         update: when ``output`` exists, keep its sequences, project only the layers that are not
             among its sources and append them (same garment, lod, body and settings required);
-            nothing is written when every layer is already there.
+            when every layer is already there, nothing is projected. Kept sequences projected
+            before flagged frames were recorded get them from their layers when all of those
+            still exist (else the set records none); the file is then written even with no
+            new layer.
         on_read: called once with the total number of frames after all inputs are read.
         progress: called with the number of frames projected so far (after each chunk of
             frames with one worker, after each sequence with several).
@@ -165,8 +171,13 @@ def project_layers(
     if update and output.is_file():
         kept = load_canonical_set(output)
         _check_same_projection(kept, output, garment, lod, settings)
+        recorded = kept.flagged is not None
+        if not recorded:
+            kept.flagged = _flags_of_sources(kept)
         new = [k for k, sim in enumerate(sim_layers) if str(Path(sim)) not in kept.sources]
         if not new:
+            if not recorded and kept.flagged is not None:
+                save_canonical_set(output, kept)
             return kept
         sim_layers = [sim_layers[k] for k in new]
         body_layers = body_layers if len(body_layers) == 1 else [body_layers[k] for k in new]
@@ -194,7 +205,9 @@ def project_layers(
             )
         motion, _ = read_smpl_motion(body_layers[k % len(body_layers)], body)
         inputs.append(
-            SequenceInput(Path(sim), points, match_frames(points, info.time_codes, motion))
+            SequenceInput(
+                Path(sim), points, match_frames(points, info.time_codes, motion), info.flagged
+            )
         )
     total = sum(len(i.points) for i in inputs)
     if on_read is not None:
@@ -231,6 +244,7 @@ def project_layers(
         faces=template.faces,
         sources=[str(i.source) for i in inputs],
         splits=splits,
+        flagged=np.concatenate([i.flagged for i in inputs]),
         metadata={
             "garment": garment,
             "lod": lod,
@@ -249,6 +263,28 @@ def project_layers(
         data = concat_canonical_sets(kept, data)
     save_canonical_set(output, data)
     return data
+
+
+def _flags_of_sources(data: CanonicalSet) -> np.ndarray | None:
+    """``(T,)`` bool: the flagged frames of ``data``'s sequences read from their garment layers;
+    None when a layer is gone.
+
+    Raises:
+        ValueError: a layer has another number of frames than its sequence.
+    """
+    parts = []
+    for s, source in enumerate(data.sources):
+        if not Path(source).is_file():
+            return None
+        _, _, info = read_garment_layer(source)
+        frames = data.sequence(s)
+        if len(info.flagged) != frames.stop - frames.start:
+            raise ValueError(
+                f"{source}: {len(info.flagged)} frames, its sequence in the set "
+                f"{frames.stop - frames.start}"
+            )
+        parts.append(info.flagged)
+    return np.concatenate(parts) if parts else np.zeros(0, dtype=bool)
 
 
 def _check_same_projection(
