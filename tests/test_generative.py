@@ -345,6 +345,44 @@ def test_resume_continues_the_epoch_count(tmp_path, data):
         train_vae(data, small_config(), fields=SphereBody(), checkpoint=fresh, resume=True)
 
 
+def test_training_skips_what_the_simulation_flagged(data):
+    """With ``skip_flagged_frames``, flagged training frames (here garbage) are left out of the
+    statistics and the training: the run on the spoilt set fits as the run on the clean one
+    (up to the summation order's rounding, which Adam's steps amplify), while without it the
+    garbage adds half the reconstruction error again; a set without a record is refused."""
+    spoilt = CanonicalSet(**{**vars(data), "canonical": data.canonical.copy()})
+    spoilt.flagged = np.zeros(len(data.canonical), dtype=bool)
+    spoilt.flagged[len(data.canonical) - 10 :] = True  # the last training sequence's end
+    clean = CanonicalSet(**{**vars(spoilt), "canonical": data.canonical})
+    spoilt.canonical[spoilt.flagged] *= 1.5
+    config = small_config(epochs=2, skip_flagged_frames=True)
+    first, history = train_vae(clean, config, fields=SphereBody())
+    second, spoilt_history = train_vae(spoilt, config, fields=SphereBody())
+    assert history["flagged_frames_skipped"] == 10
+    assert history["frames"]["train"] == len(split_frames(data, "train")) - 10
+    kept = split_frames(data, "train")[:-10]
+    torch.testing.assert_close(second.mean, torch.as_tensor(data.canonical[kept]).mean(0))
+    torch.testing.assert_close(second.std, first.std)
+    rec = history["epochs"][-1]["rec"]
+    assert spoilt_history["epochs"][-1]["rec"] == pytest.approx(rec, rel=0.01)
+    _, plain = train_vae(spoilt, small_config(epochs=2), fields=SphereBody())
+    assert plain["epochs"][-1]["rec"] > 1.2 * rec
+    with pytest.raises(ValueError, match="flagged"):
+        train_vae(data, config, fields=SphereBody())
+
+
+def test_a_checkpoint_older_than_a_setting_resumes_with_its_default(tmp_path, data):
+    path = tmp_path / "vae.ckpt"
+    train_vae(data, small_config(epochs=1), fields=SphereBody(), checkpoint=path)
+    state = torch.load(path, weights_only=True)
+    del state["config"]["skip_flagged_frames"]
+    torch.save(state, path)
+    _, history = train_vae(
+        data, small_config(epochs=2), fields=SphereBody(), checkpoint=path, resume=True
+    )
+    assert [row["epoch"] for row in history["epochs"]] == [1, 2]
+
+
 def test_training_with_the_body_fields():
     """The real canonical body SDF (``BodyFields``) and the real low T-shirt: two epochs run,
     every figure is finite and nothing enters the body."""

@@ -34,6 +34,7 @@ from usd_garment.training.pose import (
 from usd_garment.training.posed_planes import PosedPlanes
 from usd_garment.training.regressor import (
     RegressorTrainConfig,
+    decoded_crops,
     latent_losses,
     prepare_sequence,
     train_regressor,
@@ -570,3 +571,79 @@ def test_regressor_tunes_the_decoder_end_to_end() -> None:
             data, _encode, _codec(), _small_config(**small, tune_decoder=True), decode=decode,
             decoder=tuned, resume=True,
         )  # fmt: skip
+
+
+def test_flagged_frames_are_not_trusted_at_the_model_rate() -> None:
+    """A frame the simulation flagged is left out at 30 fps, and so is a frame interpolated
+    from it; a set without a record of flagged frames is refused."""
+    data = synthetic_set(lengths=(41, 30), splits=["train", "validation"], fps=[50.0, 30.0])
+    data.flagged = np.zeros(71, dtype=bool)
+    data.flagged[[12, 41 + 3]] = True
+    config = _small_config(skip_flagged_frames=True)
+    resampled = prepare_sequence(data, 0, _encode, _codec(), config)
+    # at 30 fps, frame 7 lies at 50 fps frame 11.67, between frames 11 and 12
+    assert resampled.num_frames == 25
+    assert resampled.trusted is not None
+    assert torch.nonzero(resampled.trusted == 0).flatten().tolist() == [7]
+    same = prepare_sequence(data, 1, _encode, _codec(), config)
+    assert same.trusted is not None
+    assert torch.nonzero(same.trusted == 0).flatten().tolist() == [3]
+    assert prepare_sequence(data, 1, _encode, _codec(), _small_config()).trusted is None
+    data.flagged = None
+    with pytest.raises(ValueError, match="flagged"):
+        prepare_sequence(data, 0, _encode, _codec(), config)
+
+
+def test_decoded_crops_leave_out_untrusted_frames() -> None:
+    data = synthetic_set(lengths=(40, 35), splits=["train", "train"])
+    data.flagged = np.zeros(75, dtype=bool)
+    data.flagged[[2, 50]] = True
+    config = _small_config(skip_flagged_frames=True)
+    sequences = [prepare_sequence(data, s, _encode, _codec(), config) for s in (0, 1)]
+    pred = torch.zeros(2, 6, LATENT)  # crops of 6 frames: set frames 0-5 and 48-53
+    out = decoded_crops(pred, sequences, [(0, 0), (1, 8)], _decode)
+    assert out is not None
+    x, frames = out
+    assert frames.tolist() == [0, 1, 3, 4, 5, 48, 49, 51, 52, 53]
+    assert x.shape == (10, N_VERTS, 3)
+    data.flagged[:] = True
+    sequences = [prepare_sequence(data, s, _encode, _codec(), config) for s in (0, 1)]
+    assert decoded_crops(pred, sequences, [(0, 0), (1, 8)], _decode) is None
+
+
+def test_training_skips_what_the_simulation_flagged() -> None:
+    """With ``skip_flagged_frames``, the targets of flagged frames (here garbage, with garbage
+    posed planes) change nothing of what the regressor and the tuned decoder learn, through
+    every loss term; without it they do."""
+    data = synthetic_set(lengths=(40, 35, 30), splits=["train", "train", "validation"])
+    data.flagged = np.zeros(105, dtype=bool)
+    data.flagged[[5, 6, 7, 50]] = True
+    x = torch.as_tensor(data.canonical)
+    planes = PosedPlanes(
+        torch.ones(x.shape), torch.zeros(x.shape[:2]), torch.ones(x.shape[:2], dtype=torch.bool)
+    )
+    to_garment, to_latent = _linear_maps()
+    small = {"hidden": (16,), "epochs": 3, "crops_per_epoch": 8, "lambda_posed": 10.0,
+             "tune_decoder": True}  # fmt: skip
+
+    def trained(garbage: bool, skip: bool) -> tuple[list[torch.Tensor], dict]:
+        spoilt = CanonicalSet(**{**vars(data), "canonical": data.canonical.copy()})
+        bent = PosedPlanes(planes.normal.clone(), planes.offset.clone(), planes.valid)
+        if garbage:
+            spoilt.canonical[data.flagged] = 0.3
+            bent.offset[torch.as_tensor(data.flagged)] = -1.0
+        linear = torch.nn.Linear(LATENT, N_VERTS * 3, bias=False)
+        with torch.no_grad():
+            linear.weight.copy_(to_garment @ torch.linalg.pinv(to_latent @ to_garment))
+        model, history = train_regressor(
+            spoilt, _encode, _codec(), _small_config(**small, skip_flagged_frames=skip),
+            decode=lambda z: linear(z).reshape(-1, N_VERTS, 3), planes=bent, decoder=linear,
+        )  # fmt: skip
+        return [*model.state_dict().values(), linear.weight.detach()], history
+
+    clean, history = trained(garbage=False, skip=True)
+    assert history["flagged_frames_skipped"] == 4
+    for a, b in zip(clean, trained(garbage=True, skip=True)[0], strict=True):
+        torch.testing.assert_close(a, b)
+    unskipped = trained(garbage=True, skip=False)[0]
+    assert not all(torch.allclose(a, b) for a, b in zip(clean, unskipped, strict=True))

@@ -71,6 +71,11 @@ class RegressorTrainConfig:
             crop frames' vertices to their canonical targets. Needs the decoder module; no
             ``resume``.
         lambda_vertex: λ_vertex (per m), with ``tune_decoder``.
+        skip_flagged_frames: leave the frames that the simulation flagged (kept though they
+            failed its checks) out of every training loss term and z's normalisation (at the
+            model's frame rate, a frame interpolated from a flagged one is left out too); the
+            crops still run the GRU through them (their body motion is sound), and γ's
+            normalisation and the validation figures use all frames.
         seed: seed of the initial weights and of the crops.
         device: torch device of the training (``encode_latent``/``decode`` get tensors there).
     """
@@ -93,6 +98,7 @@ class RegressorTrainConfig:
     init_from: str | None = None
     tune_decoder: bool = False
     lambda_vertex: float = 40.0
+    skip_flagged_frames: bool = False
     seed: int = 0
     device: str = "cpu"
 
@@ -119,6 +125,8 @@ class RegressorSequence:
         canonical: ``(T, N, 3)`` canonical garments (m), kept for validation sequences only.
         first_frame: the index of its first frame in the canonical set; None when it was
             resampled (its frames are not the set's).
+        trusted: ``(T,)`` float, 1 where the frame's target enters the training losses, 0 where
+            the simulation flagged it; None: every frame.
     """
 
     gamma: torch.Tensor
@@ -126,6 +134,7 @@ class RegressorSequence:
     latent: torch.Tensor
     canonical: torch.Tensor | None = None
     first_frame: int | None = None
+    trusted: torch.Tensor | None = None
 
     @property
     def num_frames(self) -> int:
@@ -157,7 +166,13 @@ def prepare_sequence(
     keep_canonical: bool = False,
 ) -> RegressorSequence:
     """γ, β and latent targets of sequence ``s`` of ``data``, resampled to :data:`MODEL_FPS`
-    (pose by slerp, translation and canonical garments linearly) if its fps differs."""
+    (pose by slerp, translation and canonical garments linearly) if its fps differs; with
+    ``config.skip_flagged_frames``, which frames are trusted (a resampled frame is not when either
+    frame it is interpolated from was flagged).
+
+    Raises:
+        ValueError: ``skip_flagged_frames`` on a set without a record of flagged frames.
+    """
     device = torch.device(config.device)
     frames = data.sequence(s)
     fps = float(data.fps[s])
@@ -166,6 +181,10 @@ def prepare_sequence(
         np.asarray(data.canonical[frames], dtype=np.float32), fps, MODEL_FPS
     )
     gamma = motion_descriptor(motion.pose, motion.trans, codec, MODEL_FPS, config.padding)
+    trusted = None
+    if config.skip_flagged_frames:
+        flagged = resample_frames(data.flags()[frames].astype(np.float32), fps, MODEL_FPS) > 0
+        trusted = torch.as_tensor(~flagged, dtype=torch.float32, device=device)
     x = torch.as_tensor(canonical, dtype=torch.float32)
     latent = torch.cat(
         [
@@ -179,6 +198,7 @@ def prepare_sequence(
         latent=latent,
         canonical=x if keep_canonical else None,
         first_frame=frames.start if np.isclose(fps, MODEL_FPS) else None,
+        trusted=trusted,
     )
 
 
@@ -208,11 +228,14 @@ def latent_losses(
 def _normalization(
     sequences: list[RegressorSequence],
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Mean and deviation of ``[γ, β]`` per frame and of z over the training frames."""
+    """Mean and deviation of ``[γ, β]`` per frame over the training frames and of z over the
+    trusted ones."""
     inputs = torch.cat(
         [torch.cat([q.gamma, q.betas.expand(q.num_frames, -1)], dim=-1) for q in sequences]
     ).double()
-    latent = torch.cat([q.latent for q in sequences]).double()
+    latent = torch.cat(
+        [q.latent if q.trusted is None else q.latent[q.trusted > 0] for q in sequences]
+    ).double()
     return (
         inputs.mean(0).float(),
         inputs.std(0, correction=0).float(),
@@ -226,7 +249,8 @@ def _batch(
     picks: list[tuple[int, int]],
     length: int,
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Crops ``(B, L, ·)`` of γ and z, the betas ``(B, 10)`` and the valid-frame mask ``(B, L)``."""
+    """Crops ``(B, L, ·)`` of γ and z, the betas ``(B, 10)`` and the mask ``(B, L)`` of the frames
+    whose targets count (not padding, trusted)."""
     first = sequences[0]
     b = len(picks)
     gamma = first.gamma.new_zeros((b, length, first.gamma.shape[-1]))
@@ -238,7 +262,7 @@ def _batch(
         n = min(length, q.num_frames - start)
         gamma[i, :n] = q.gamma[start : start + n]
         latent[i, :n] = q.latent[start : start + n]
-        mask[i, :n] = 1.0
+        mask[i, :n] = 1.0 if q.trusted is None else q.trusted[start : start + n]
     return gamma, betas, latent, mask
 
 
@@ -299,18 +323,22 @@ def decoded_crops(
 ) -> tuple[torch.Tensor, torch.Tensor] | None:
     """The decoded garments ``(F, N, 3)`` (m) of the predicted codes ``pred`` ``(B, L, latent)``
     of the crops ``picks`` (sequence, first frame) of ``sequences``, and each one's frame index
-    in the canonical set ``(F,)``; padding and resampled sequences (whose frames are not the
-    set's) are left out; None when nothing is left. Decoded once for L_posed and L_vertex."""
+    in the canonical set ``(F,)``; padding, untrusted frames and resampled sequences (whose
+    frames are not the set's) are left out; None when nothing is left. Decoded once for
+    L_posed and L_vertex."""
     rows, cols, frames = [], [], []
     for i, (s, start) in enumerate(picks):
         q = sequences[s]
         if q.first_frame is None:
             continue
         n = min(pred.shape[1], q.num_frames - start)
-        rows.append(torch.full((n,), i))
-        cols.append(torch.arange(n))
-        frames.append(torch.arange(q.first_frame + start, q.first_frame + start + n))
-    if not rows:
+        col = torch.arange(n)
+        if q.trusted is not None:
+            col = col[q.trusted[start : start + n].cpu() > 0]
+        rows.append(torch.full((len(col),), i))
+        cols.append(col)
+        frames.append(q.first_frame + start + col)
+    if not rows or not sum(len(c) for c in cols):
         return None
     return decode(pred[torch.cat(rows), torch.cat(cols)]), torch.cat(frames)
 
@@ -379,7 +407,8 @@ def train_regressor(
     Returns:
         The regressor (eval mode, on ``config.device``, normalisation set from the training
         frames) and the history (JSON-able): ``config``, ``model``, ``codec``, the sequence and
-        frame counts, ``decoder_floor_mm`` (the validation vertex error of the true latents when
+        frame counts, ``flagged_frames_skipped`` (training frames at the model's rate),
+        ``decoder_floor_mm`` (the validation vertex error of the true latents when
         ``decode`` is given) and ``epochs``, one row per epoch: ``epoch`` (1-based), ``lr``,
         ``train_loss``, ``train_pos``, ``train_vel``, ``train_acc`` (means over the epoch's
         batches; ``train_posed`` too with λ_posed > 0, ``train_vertex_mm`` with
@@ -391,8 +420,8 @@ def train_regressor(
     global torch random state is left alone); CUDA kernels may not be bitwise deterministic.
 
     Raises:
-        ValueError: no training sequences, a bad config, or a checkpoint of another kind or
-            model shape.
+        ValueError: no training sequences, a bad config, ``skip_flagged_frames`` on a set without
+            a record of flagged frames, or a checkpoint of another kind or model shape.
     """
     config = config or RegressorTrainConfig()
     if config.crop_length < 3 or config.batch_size < 1:
@@ -449,6 +478,9 @@ def train_regressor(
         "codec": codec.config(),
         "train_sequences": len(train),
         "train_frames": total_frames,
+        "flagged_frames_skipped": sum(
+            int((q.trusted == 0).sum()) for q in train if q.trusted is not None
+        ),
         "validation_sequences": len(val),
         "validation_frames": sum(q.num_frames for q in val),
         "decoder_floor_mm": None,

@@ -79,6 +79,9 @@ class VaeTrainConfig:
         decoder: the decoder's architecture.
         pca_init: start a basis decoder's basis at the data's principal components.
         eval_random: random latents (fixed per run, from ``seed``) decoded in each evaluation.
+        skip_flagged_frames: leave the training frames that the simulation flagged (kept though
+            they failed its checks) out of the training and of the statistics; the validation
+            frames stay all.
         seed: seeds the weights, the batch order and every random draw.
         device: torch device of the run.
     """
@@ -99,6 +102,7 @@ class VaeTrainConfig:
     decoder: DecoderConfig = field(default_factory=DecoderConfig)
     pca_init: bool = True
     eval_random: int = 1024
+    skip_flagged_frames: bool = False
     seed: int = 0
     device: str = "cpu"
 
@@ -228,6 +232,8 @@ def _save_checkpoint(path: Path, state: dict[str, Any]) -> None:
 
 
 def _check_resumable(saved: dict[str, Any], config: VaeTrainConfig, path: Path) -> None:
+    # a setting added after the checkpoint was made had its default then
+    saved = {**VaeTrainConfig().to_dict(), **saved}
     a = {k: v for k, v in saved.items() if k not in RESUMABLE}
     b = {k: v for k, v in config.to_dict().items() if k not in RESUMABLE}
     changed = sorted(k for k in a.keys() | b.keys() if a.get(k) != b.get(k))
@@ -267,19 +273,21 @@ def train_vae(
             match; the remaining epochs then match an uninterrupted run on the CPU).
 
     Returns:
-        The trained model (evaluation mode) and the history: ``config``, ``frames`` per split,
-        ``validation_inside_pct`` (the ground truth's own share inside the body) and
-        ``epochs``, one row per epoch: ``epoch``, ``lr``, ``seconds``, the mean training terms
-        ``loss``, ``rec``, ``laplacian``, ``collision_rec``, ``collision_random``, ``kl`` (per
-        garment, m / nats; collision terms are measured even when not trained on) and the
-        ``val_*`` figures of ``evaluate_vae``. JSON-able.
+        The trained model (evaluation mode) and the history: ``config``, ``frames`` per split
+        (training frames used), ``flagged_frames_skipped``, ``validation_inside_pct`` (the
+        ground truth's own share inside the body) and ``epochs``, one row per epoch: ``epoch``,
+        ``lr``, ``seconds``, the mean training terms ``loss``, ``rec``, ``laplacian``,
+        ``collision_rec``, ``collision_random``, ``kl`` (per garment, m / nats; collision terms
+        are measured even when not trained on) and the ``val_*`` figures of ``evaluate_vae``.
+        JSON-able.
 
     The same data and config give the same result on the CPU (seeded weights and draws; the
     global torch random state is left alone); CUDA kernels may not be bitwise deterministic.
 
     Raises:
-        ValueError: no training frames; a resumed checkpoint that is not a VAE checkpoint, or
-            was made with other settings or on other data.
+        ValueError: no training frames; ``skip_flagged_frames`` on a set without a record of
+            them; a resumed checkpoint that is not a VAE checkpoint, or was made with other
+            settings or on other data.
         FloatingPointError: the loss is not finite (NaN or infinite).
     """
     device = torch.device(device if device is not None else config.device)
@@ -287,6 +295,11 @@ def train_vae(
         fields.to(device)
     sdf = fields.sdf
     train_idx = split_frames(data, "train")
+    flagged = 0
+    if config.skip_flagged_frames:
+        keep = ~data.flags()[train_idx]
+        flagged = int(len(train_idx) - keep.sum())
+        train_idx = train_idx[keep]
     val_idx = split_frames(data, "validation")
     if len(train_idx) == 0:
         raise ValueError("the canonical set has no training frames")
@@ -307,6 +320,7 @@ def train_vae(
     history: dict[str, Any] = {
         "config": config.to_dict(),
         "frames": {"train": len(train_idx), "validation": len(val_idx)},
+        "flagged_frames_skipped": flagged,
         "num_vertices": num_vertices,
         "validation_inside_pct": _inside_pct(val_x, sdf, device),
         "epochs": [],
