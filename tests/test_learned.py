@@ -40,9 +40,10 @@ TINY = {
 }  # fmt: skip
 
 
-def tiny_canonical_set(body: BodyModel, path: Path) -> None:
+def tiny_canonical_set(body: BodyModel, path: Path, flagged: np.ndarray | None = None) -> None:
     """Three short sequences (train, validation, test) of the low T-shirt, breathing in and out
-    with the motion: enough for the pipeline, not a garment model."""
+    with the motion: enough for the pipeline, not a garment model. ``flagged``: ``(60,)`` bool,
+    the frames the simulation flagged (no record if None)."""
     template = load_template("tshirt", "low")
     v = template.vertices.astype(np.float32)
     canonical, pose, trans, offsets = [], [], [], [0]
@@ -62,6 +63,7 @@ def tiny_canonical_set(body: BodyModel, path: Path) -> None:
             fps=np.full(3, 30.0), error=np.zeros(frames), max_error=np.zeros(frames),
             template=v, faces=template.faces, sources=["a", "b", "c"],
             splits=["train", "validation", "test"], metadata={"garment": "tshirt", "lod": "low"},
+            flagged=flagged,
         ),
     )  # fmt: skip
 
@@ -210,16 +212,17 @@ def test_fine_tuning_on_cuda_is_the_fine_tuning_on_the_cpu(
     body_model: BodyModel, synthetic_body: BodyModel, tmp_path: Path
 ) -> None:
     """The end-to-end fine-tune (the posed collision term on the CPU's planes, the decoder
-    moving) of one CPU-trained model, run with ``--device cuda``, logs what the CPU's logs."""
+    moving, the frames the simulation flagged skipped) of one CPU-trained model, run with
+    ``--device cuda``, logs what the CPU's logs."""
     if body_model is synthetic_body:
         pytest.skip("needs the embedded default body and its fields")
     data, config, model = tmp_path / "set.npz", tmp_path / "tiny.json", tmp_path / "model"
-    tiny_canonical_set(body_model, data)
+    tiny_canonical_set(body_model, data, flagged=np.isin(np.arange(60), [4, 5, 6, 15]))
     config.write_text(json.dumps(TINY))
     code, output = _run(["train", "all", "--data", data, "--out", model, "--config", config])
     assert code == 0, output
     regressor = {**TINY["regressor"], "init_from": str(model), "lambda_posed": 1.0,
-                 "tune_decoder": True}  # fmt: skip
+                 "tune_decoder": True, "skip_flagged_frames": True}  # fmt: skip
     config.write_text(json.dumps({**TINY, "regressor": regressor}))
     figures = {}
     for device in ("cpu", "cuda"):
