@@ -326,7 +326,8 @@ def _networks_table(rows: list[NetworkFloor]) -> str:
 @json_option("Print every group's figures as JSON.")
 def summary(folder: Path, by: str, as_json: bool) -> None:
     """The simulation checks of the dataset in FOLDER (from its manifest), summed up: inside the
-    body forced / elsewhere, distance from the body, stretch, NaN, retried and bad frames."""
+    body forced / elsewhere, distance from the body, stretch (p99 and the largest single edge),
+    NaN, retried and bad frames."""
     with user_errors():
         rows = dataset_quality(read_manifest(folder), by)
     if as_json:
@@ -340,14 +341,16 @@ def _summary_table(rows: list[GroupQuality]) -> str:
     lines = [
         "group | ok / sequences | frames | forced mean % | elsewhere mean / worst frame % "
         "| sequences above 0.05 % mean / 0.5 % frame | farthest cm (sequences > 10 cm) "
-        "| stretch p99 max | NaN / retried / bad frames | simulation min"
+        "| stretch p99 max (largest edge) | NaN / retried / bad frames | simulation min"
     ]
     for r in rows:
+        largest = "–" if r.stretch_max is None else f"{r.stretch_max:.2f}"
         lines.append(
             f"{r.group} | {r.ok} / {r.sequences} | {r.frames} | {100 * r.forced_mean:.3f} "
             f"| {100 * r.elsewhere_mean:.3f} / {100 * r.elsewhere_max:.3f} "
             f"| {r.above_mean} / {r.above_frame} | {100 * r.max_distance_m:.1f} ({r.far}) "
-            f"| {r.stretch_p99_max:.3f} | {r.nan_frames} / {r.retried_frames} / {r.bad_frames} "
+            f"| {r.stretch_p99_max:.3f} ({largest}) | {r.nan_frames} / {r.retried_frames} / "
+            f"{r.bad_frames} "
             f"| {r.seconds / 60:.1f}"
         )
     return "\n".join(lines)

@@ -94,7 +94,8 @@ def simulate(
         f"{100 * settings['inside_forced_share_mean']:.3f}%, elsewhere mean "
         f"{100 * settings['inside_elsewhere_share_mean']:.3f}% (max "
         f"{100 * settings['inside_elsewhere_share_max']:.3f}%), max distance "
-        f"{settings['max_distance_m']:.3f} m, stretch p99 max {settings['stretch_p99_max']:.3f}, "
+        f"{settings['max_distance_m']:.3f} m, stretch p99 max {settings['stretch_p99_max']:.3f} "
+        f"(largest edge {settings['stretch_max']:.2f}), "
         f"{len(settings['retries'])} frames retried, {settings['bad_frames']} bad frames kept"
     )
     for path in result.outputs:

@@ -29,7 +29,8 @@ def _entry(name: str, split: str, kind: str, frames: int, **checks: Any) -> dict
 
 @pytest.fixture
 def manifest() -> dict[str, Any]:
-    capture = _entry("c00_s0", "test", "capture", 300, max_distance_m=0.12, stretch_p99_max=1.25)
+    capture = _entry("c00_s0", "test", "capture", 300, max_distance_m=0.12, stretch_p99_max=1.25,
+                     stretch_max=4.5)  # fmt: skip
     capture["capture"] = "/data/cmu_131_03.bvh"
     bad = {**_entry("m01_s0", "train", "run", 90), "status": "bad"}
     del bad["checks"]
@@ -55,6 +56,8 @@ def test_rows_are_frame_weighted_and_count_the_targets(manifest: dict[str, Any])
     assert (train.elsewhere_max, train.above_mean, train.above_frame) == (6e-3, 1, 1)
     assert (train.retried_frames, train.bad_frames, train.far) == (2, 1, 0)
     assert (test.far, test.max_distance_m, test.stretch_p99_max) == (1, 0.12, 1.25)
+    # the largest edge: only the capture's entry records it (the others predate it)
+    assert (train.stretch_max, test.stretch_max, every.stretch_max) == (None, 4.5, 4.5)
     assert (every.group, every.ok, every.frames, every.seconds) == ("all", 3, 700, 180.0)
     assert every.elsewhere_mean == pytest.approx((0.1 + 0.06) / 700)
     kinds = [row.group for row in dataset_quality(manifest, "kind")]
@@ -71,6 +74,7 @@ def test_cli_table_json_and_errors(tmp_path: Path, manifest: dict[str, Any]) -> 
     assert result.exit_code == 0, result.output
     lines = result.output.splitlines()
     assert lines[3].startswith("cmu_131_03 | 1 / 1 | 300 |") and "| 12.0 (1) |" in lines[3]
+    assert "| 1.250 (4.50) |" in lines[3] and "| 1.100 (–) |" in lines[1]
     assert lines[1].startswith("walk | 2 / 2 | 400 | 0.050 | 0.040 / 0.600 | 1 / 1 |")
     result = runner.invoke(main, ["dataset", "summary", str(tmp_path), "--json"])
     rows = json.loads(result.output)

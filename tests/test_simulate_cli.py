@@ -72,8 +72,12 @@ def test_simulate_writes_a_simulation_layer(tmp_path: Path) -> None:
     assert settings["max_distance_m"] < 0.15 and settings["penetrating_share_max"] <= 0.005
     assert settings["strict"] is False and settings["bad_frames"] == 0
     per_frame = settings["per_frame"]
-    for key in ("inside_forced", "inside_elsewhere", "stretch_p99", "projected", "substeps", "bad"):
+    for key in ("inside_forced", "inside_elsewhere", "stretch_p99", "stretch_max", "projected",
+                "substeps", "bad"):  # fmt: skip
         assert len(per_frame[key]) == 4, key
+    pairs = zip(per_frame["stretch_p99"], per_frame["stretch_max"], strict=True)
+    assert all(p99 <= largest for p99, largest in pairs)
+    assert settings["stretch_max"] == pytest.approx(max(per_frame["stretch_max"]), abs=1e-4)
     assert 0.0 <= settings["projected_share_mean"] <= settings["projected_share_max"] <= 1.0
     assert per_frame["bad"] == [0] * 4 and per_frame["substeps"] == [SUBSTEPS] * 4
     assert max(per_frame["inside_elsewhere"]) <= settings["inside_elsewhere_share_max"] + 1e-6

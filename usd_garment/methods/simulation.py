@@ -314,12 +314,14 @@ def result_summary(result: SimResult, substeps: int) -> dict[str, Any]:
     over the motion frames: ``inside_share_mean/max`` (inside the body, forced or not),
     ``inside_forced_share_mean/max``, ``inside_elsewhere_share_mean/max``,
     ``penetrating_share_max`` (inside-elsewhere deeper than the limit's depth),
-    ``max_distance_m``, ``stretch_p99_max``, ``projected_share_mean/max`` (vertices the
-    end-of-frame projection moved out of the body); the lead-in's ``lead_in_stretch_p99_first`` and
-    ``lead_in_stretch_p99_max``; and ``per_frame``, lists over the motion frames (shares as
-    fractions rounded to 6 decimals, distances in m to 4, stretch to 4; None where NaN):
-    ``inside_forced``, ``inside_elsewhere``, ``penetrating``, ``max_distance_m``,
-    ``stretch_p99``, ``projected``, ``substeps`` (used, after retries) and ``bad`` (0/1).
+    ``max_distance_m``, ``stretch_p99_max``, ``stretch_max`` (the single most stretched edge:
+    a vertex snagged on a limb shows there, not in the p99), ``projected_share_mean/max``
+    (vertices the end-of-frame projection moved out of the body); the lead-in's
+    ``lead_in_stretch_p99_first`` and ``lead_in_stretch_p99_max``; and ``per_frame``, lists over
+    the motion frames (shares as fractions rounded to 6 decimals, distances in m to 4, stretch
+    to 4; None where NaN): ``inside_forced``, ``inside_elsewhere``, ``penetrating``,
+    ``max_distance_m``, ``stretch_p99``, ``stretch_max``, ``projected``, ``substeps`` (used,
+    after retries) and ``bad`` (0/1).
     """
     checks = result.checks
     retries = {
@@ -347,6 +349,7 @@ def result_summary(result: SimResult, substeps: int) -> dict[str, Any]:
         "penetrating_share_max": _reduce([c.penetrating_share for c in checks], max),
         "max_distance_m": _reduce([c.max_distance for c in checks], max),
         "stretch_p99_max": _reduce([c.stretch_p99 for c in checks], max),
+        "stretch_max": _reduce([c.stretch_max for c in checks], max),
         "projected_share_mean": _reduce(result.projected, np.mean),
         "projected_share_max": _reduce(result.projected, max),
         "lead_in_stretch_p99_first": _reduce(lead[:1], max),
@@ -357,6 +360,7 @@ def result_summary(result: SimResult, substeps: int) -> dict[str, Any]:
             "penetrating": _rounded([c.penetrating_share for c in checks], 6),
             "max_distance_m": _rounded([c.max_distance for c in checks], 4),
             "stretch_p99": _rounded([c.stretch_p99 for c in checks], 4),
+            "stretch_max": _rounded([c.stretch_max for c in checks], 4),
             "projected": _rounded(result.projected, 6),
             "substeps": [int(n) for n in result.substeps],
             "bad": [int(b) for b in result.bad],

@@ -45,6 +45,8 @@ class GroupQuality:
         far: ok sequences with a vertex farther from the body than the distance target.
         max_distance_m: largest distance of a vertex from the body (m).
         stretch_p99_max: worst frame's 99th percentile of edge length over rest length.
+        stretch_max: the most stretched single edge (edge length over rest length); None when
+            no sequence's manifest entry records it (made before stop 40).
         nan_frames: frames with a non-finite vertex.
         retried_frames: frames simulated again with more substeps.
         bad_frames: frames kept although they failed their checks at the most substeps.
@@ -63,6 +65,7 @@ class GroupQuality:
     far: int
     max_distance_m: float
     stretch_p99_max: float
+    stretch_max: float | None
     nan_frames: int
     retried_frames: int
     bad_frames: int
@@ -109,6 +112,9 @@ def _group(name: str, entries: list[dict[str, Any]]) -> GroupQuality:
         far=sum(c["max_distance_m"] > DISTANCE_TARGET for c in checks),
         max_distance_m=most("max_distance_m"),
         stretch_p99_max=most("stretch_p99_max"),
+        stretch_max=max(
+            (c["stretch_max"] for c in checks if c.get("stretch_max") is not None), default=None
+        ),
         nan_frames=sum(c["nan_frames"] for c in checks),
         retried_frames=sum(len(c["retries"]) for c in checks),
         bad_frames=sum(c["bad_frames"] for c in checks),

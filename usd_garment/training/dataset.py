@@ -295,7 +295,7 @@ def run_sequence(folder: str, config: DatasetConfig, spec: SequenceSpec) -> dict
             "inside_share_mean", "inside_share_max", "inside_forced_share_mean",
             "inside_forced_share_max", "inside_elsewhere_share_mean",
             "inside_elsewhere_share_max", "penetrating_share_max", "max_distance_m",
-            "stretch_p99_max", "projected_share_mean", "projected_share_max",
+            "stretch_p99_max", "stretch_max", "projected_share_mean", "projected_share_max",
         )
     }  # fmt: skip
     entry["seconds"] = time.perf_counter() - started
