@@ -222,6 +222,19 @@ def test_far_frame_is_retried_but_not_fatal() -> None:
     assert fell.fatal(limits) == ["a vertex 0.160 m from the body (fell off)"]
 
 
+def test_a_snagged_edge_fails_the_frame_though_the_p99_passes() -> None:
+    """One edge stretched past ``max_edge_stretch`` (a hem vertex caught on a thigh) fails the
+    frame, so it is simulated again with more substeps, while the p99 is within its limit; it
+    is not fatal."""
+    limits = CheckLimits()
+    check = FrameCheck(
+        nan_count=0, inside_share=0.0, inside_forced_share=0.0, inside_elsewhere_share=0.0,
+        penetrating_share=0.0, max_distance=0.05, stretch_p99=1.2, stretch_max=3.0,
+    )  # fmt: skip
+    assert check.failures(limits) == ["an edge stretched 3.00x"] and check.fatal(limits) == []
+    assert replace(check, stretch_max=limits.max_edge_stretch).failures(limits) == []
+
+
 def test_forced_contact_is_not_a_failure() -> None:
     """Cloth on an arm pressed into the trunk lies inside the body, forced by the pose: the
     frame passes; the same share inside elsewhere fails it."""
