@@ -40,11 +40,11 @@ class CheckLimits:
             with 4 substeps a frame, 10.4 cm with 16), and kept flagged bad if it stays
             beyond.
         max_stretch: largest tolerated p99 of current / rest edge length.
-        max_edge_stretch: largest tolerated current / rest length of any single edge: a hem
-            vertex snagged on a thigh in a run (the leg passed it within one substep at 4 a
-            frame) stretches a few edges 3–7× while the p99 stays under ``max_stretch``; more
-            substeps avoid the snag (v7s's run m03: largest edge 6.8× with 4 substeps and
-            retries, 1.7× with 16 throughout).
+        max_edge_stretch: largest tolerated current / rest length of any single edge: a dress
+            hem snagged on a thigh or a hand in a run stretches a few edges 3–7× while the p99
+            stays under ``max_stretch``; more substeps avoid the snag (v7s's run m03: largest
+            edge 6.8× with 4 substeps and retries, 1.7× with 16 throughout), so a frame beyond
+            it is simulated again with more, from where the snag begins.
     """
 
     inside_depth: float = 2e-3
