@@ -37,15 +37,9 @@ RED = (0.9, 0.1, 0.1)
 MARGIN = 0.15
 
 
-def triangle_stretch(points: np.ndarray, faces: np.ndarray, rest: np.ndarray) -> np.ndarray:
-    """``(F,)`` the largest current / rest length of each triangle's edges, for garment points
-    and rest vertices ``(N, 3)`` (m)."""
-    corners = [(0, 1), (1, 2), (2, 0)]
-    now = np.stack([np.linalg.norm(points[faces[:, a]] - points[faces[:, b]], axis=1)
-                    for a, b in corners], axis=1)  # fmt: skip
-    then = np.stack([np.linalg.norm(rest[faces[:, a]] - rest[faces[:, b]], axis=1)
-                     for a, b in corners], axis=1)  # fmt: skip
-    return (now / np.maximum(then, 1e-12)).max(axis=1)
+def triangle_edges(faces: np.ndarray) -> np.ndarray:
+    """``(3F, 2)`` the three edges of each triangle of ``faces`` ``(F, 3)``, face by face."""
+    return faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
 
 
 def main() -> None:
@@ -66,7 +60,7 @@ def main() -> None:
     edges = unique_edges(template.faces)
     rest_lengths = edge_lengths(rest, edges)
     for path, (points, _, _) in zip(args.garments, layers, strict=True):
-        largest = np.array([(edge_lengths(p, edges) / rest_lengths).max() for p in points])
+        largest = (edge_lengths(points, edges) / rest_lengths).max(axis=1)
         print(f"{path}: largest edge {largest.max():.2f}x, frames with an edge above "
               f"{args.ratio:g}x: {int((largest > args.ratio).sum())} of {len(points)}")  # fmt: skip
 
@@ -80,7 +74,9 @@ def main() -> None:
         right, _ = view_axes(view)
         red = []  # the red vertices of every layer: each column zooms on the same box
         for row, (path, (points, faces, _)) in enumerate(zip(args.garments, layers, strict=True)):
-            over = triangle_stretch(points[t], faces, rest) > args.ratio
+            corners = triangle_edges(faces)
+            stretch = edge_lengths(points[t], corners) / edge_lengths(rest, corners)
+            over = stretch.reshape(-1, 3).max(axis=1) > args.ratio
             red.append(points[t][np.unique(faces[over])])
             ax = axes[row, col]
             draw_meshes(ax, [(posed, body.faces.numpy(), SKIN), (points[t], faces[~over], CLOTH),
