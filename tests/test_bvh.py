@@ -4,7 +4,9 @@ a real CMU clip through the CLI, and bad input."""
 
 from __future__ import annotations
 
+import gzip
 import json
+import lzma
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,6 +29,7 @@ from usd_garment.motion.bvh import (
     BvhSkeleton,
     bone_angle_errors,
     forward_kinematics,
+    is_bvh_path,
     load_bvh,
     map_joints,
     parse_bvh,
@@ -467,6 +470,35 @@ def test_arm_clearance_options_of_the_cli(tmp_path: Path) -> None:
     assert result.exit_code == 2 and "--arm-clearance" in result.output
 
 
+def test_compressed_files_read_as_the_plain_file(body_model: BodyModel, tmp_path: Path) -> None:
+    """``.bvh.xz`` and ``.bvh.gz`` (how captures are kept in ``examples/mocap``) parse to the
+    same clip as the plain file, through the command too; other names are not BVH files."""
+    plain = read_bvh(CMU_CLIP)
+    data = CMU_CLIP.read_bytes()
+    for suffix, compress in ((".xz", lzma.compress), (".gz", gzip.compress)):
+        packed = tmp_path / f"walk.bvh{suffix}"
+        packed.write_bytes(compress(data))
+        clip = read_bvh(packed)
+        a, b = clip.skeleton, plain.skeleton
+        assert a.names == b.names and a.channels == b.channels
+        for got, want in ((a.parents, b.parents), (a.offsets, b.offsets),
+                          (a.end_sites, b.end_sites), (clip.values, plain.values)):  # fmt: skip
+            np.testing.assert_array_equal(got, want)
+        assert clip.frame_time == plain.frame_time
+        assert is_bvh_path(packed) and is_bvh_path(str(packed).upper())
+    out = tmp_path / "walk.usda"
+    args = ["import-bvh", str(tmp_path / "walk.bvh.xz"), "-o", str(out), "--frames", "0:8"]
+    result = CliRunner().invoke(main, [*args, "--no-mesh"])
+    assert result.exit_code == 0 and "8 frames at 120 fps" in result.stdout, result.output
+    assert read_smpl_motion(out, body_model)[0].num_frames == 8
+    assert is_bvh_path(CMU_CLIP)
+    assert not any(is_bvh_path(name) for name in ("walk.usda", "walk.xz", "bvh.gz", "walk.usd.gz"))
+
+
+def _not_xz(tmp: Path) -> Path:
+    return write(tmp / "walk.bvh.xz", CMU_CLIP.read_text()[:2000])
+
+
 def _truncated(tmp: Path) -> Path:
     lines = CMU_CLIP.read_text().splitlines()
     start = next(i for i, line in enumerate(lines) if line.startswith("Frame Time"))
@@ -502,10 +534,11 @@ def _armless(tmp: Path) -> Path:
         (lambda t: write(t / "nan.bvh", bvh_text(cmu_skeleton(), {}, np.full((2, 3), np.nan))),
          "NaN"),
         (lambda t: t / "missing.bvh", "missing.bvh: no such file"),
+        (_not_xz, "walk.bvh.xz: not a xz-compressed file"),
     ],
     ids=["text", "binary", "empty", "truncated", "armless", "no-motion", "open-hierarchy",
          "zero-frame-time",
-         "nan", "missing"],
+         "nan", "missing", "not-xz"],
 )  # fmt: skip
 def test_bad_input_gives_one_line_and_no_output(
     tmp_path: Path, make: Callable[[Path], Path], expected: str

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import lzma
 import os
 import pickle
 import signal
@@ -307,10 +308,15 @@ def test_kill_ends_the_dataset_workers_with_the_command(tmp_path: Path) -> None:
                 os.kill(worker, signal.SIGKILL)
 
 
-def test_a_bvh_capture_plays_whole_at_the_dataset_rate(body_model: BodyModel) -> None:
-    clip = Path(__file__).parents[2] / "shared" / "mocap" / "cmu_131_01.bvh"
-    if not clip.is_file():
+def test_a_bvh_capture_plays_whole_at_the_dataset_rate(
+    body_model: BodyModel, tmp_path: Path
+) -> None:
+    """A BVH capture, here xz-compressed as the captures of ``examples/mocap``."""
+    source = Path(__file__).parents[2] / "shared" / "mocap" / "cmu_131_01.bvh"
+    if not source.is_file():
         pytest.skip("the shared CMU clips are not beside the project")
+    clip = tmp_path / "cmu_131_01.bvh.xz"
+    clip.write_bytes(lzma.compress(source.read_bytes()))
     config = DatasetConfig(shapes=2, captures=((str(clip), "train"),), capture_shapes=2)
     spec = [s for s in plan_sequences(config) if s.capture][1]
     motion = sequence_motion(config, spec, body_model)

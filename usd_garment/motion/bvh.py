@@ -33,6 +33,8 @@ Retargeting works on world (global) rotations, so BVH joints that SMPL lacks (CM
 
 from __future__ import annotations
 
+import gzip
+import lzma
 import math
 import re
 from collections.abc import Sequence
@@ -245,16 +247,38 @@ class BvhRetarget:
 # Parsing
 
 
+#: Compressed BVH files :func:`read_bvh` opens, by their last suffix (``walk.bvh.xz``).
+COMPRESSED_SUFFIXES: dict[str, type[Exception]] = {".xz": lzma.LZMAError, ".gz": gzip.BadGzipFile}
+
+
+def is_bvh_path(path: str | Path) -> bool:
+    """Whether ``path`` names a BVH file by its suffix: ``.bvh``, or ``.bvh.xz`` / ``.bvh.gz``."""
+    suffixes = [s.lower() for s in Path(path).suffixes]
+    if suffixes and suffixes[-1] in COMPRESSED_SUFFIXES:
+        suffixes = suffixes[:-1]
+    return bool(suffixes) and suffixes[-1] == ".bvh"
+
+
 def read_bvh(path: str | Path) -> BvhClip:
-    """Parse the BVH file at ``path``.
+    """Parse the BVH file at ``path``, xz- or gzip-compressed where its name ends in ``.xz`` or
+    ``.gz``.
 
     Raises:
-        BvhError: not a BVH file, a broken HIERARCHY, or a MOTION section with missing or
-            non-finite values.
+        BvhError: not a BVH file (or a broken compressed one), a broken HIERARCHY, or a MOTION
+            section with missing or non-finite values.
         OSError: the file cannot be read.
     """
     path = Path(path)
-    data = path.read_bytes()
+    suffix = path.suffix.lower()
+    if suffix in COMPRESSED_SUFFIXES:
+        opener = lzma.open if suffix == ".xz" else gzip.open
+        try:
+            with opener(path, "rb") as stream:
+                data = stream.read()
+        except (COMPRESSED_SUFFIXES[suffix], EOFError) as exc:
+            raise BvhError(f"{path}: not a {suffix[1:]}-compressed file ({exc})") from None
+    else:
+        data = path.read_bytes()
     try:
         text = data.decode("utf-8-sig")
     except UnicodeDecodeError:

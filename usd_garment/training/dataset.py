@@ -33,7 +33,7 @@ from usd_garment.dress import dress
 from usd_garment.garment.library import load_template
 from usd_garment.garment.template import GARMENT_NAMES, LODS
 from usd_garment.methods.simulation import SimulationError, SimulationMethod
-from usd_garment.motion.bvh import load_bvh
+from usd_garment.motion.bvh import is_bvh_path, load_bvh
 from usd_garment.motion.procedural import MOTION_KINDS, make_motion, random_betas
 from usd_garment.motion.resample import resample_motion
 from usd_garment.motion.sequence import SmplMotion
@@ -248,7 +248,7 @@ def sequence_motion(config: DatasetConfig, spec: SequenceSpec, body: BodyModel) 
             spec.motion_kind, config.frames, config.fps, spec.motion_seed, betas, body,
             config.open_shoulders,
         )  # fmt: skip
-    if Path(spec.capture).suffix.lower() == ".bvh":
+    if is_bvh_path(spec.capture):
         motion, _ = load_bvh(spec.capture, body, betas=betas)
     else:
         motion, _ = read_smpl_motion(spec.capture, body)
