@@ -315,6 +315,29 @@ def test_the_shipped_members_were_trained_with_the_committed_settings(garment: s
     assert len(named) == 3  # one file per member
 
 
+def test_the_dress_recipe_script_starts_from_the_shipped_members_settings() -> None:
+    """``examples/train/dress_v9.sh`` trains each member's pose code and VAE with
+    ``dress_v9_step1_member{m}.json``: the settings that the shipped dress's member m records
+    for those stages, its regressor (trained again from nothing on the larger set) on 30-frame
+    crops with the member's seed."""
+    from usd_garment.methods.learned import shipped_model
+    from usd_garment.training.pipeline import TrainSettings
+
+    folder = shipped_model("dress")
+    assert folder is not None
+    root = Path(__file__).parent.parent
+    for m, member in enumerate(load_learned_model(folder).members):
+        assert f"examples/train/dress_v9_member{m}.json" in member.info["command"]
+        path = root / "examples" / "train" / f"dress_v9_step1_member{m}.json"
+        step1 = TrainSettings.from_dict(json.loads(path.read_text()))
+        step1.set_device("cpu")
+        recorded = TrainSettings.from_dict(member.info["training"]["settings"])
+        assert step1.to_dict()["pose"] == recorded.to_dict()["pose"]
+        assert step1.to_dict()["vae"] == recorded.to_dict()["vae"]
+        assert (step1.regressor.crop_length, step1.regressor.seed) == (30, m)
+        assert step1.regressor.init_from is None and step1.regressor.lambda_posed == 0
+
+
 def test_final_quality_pushes_the_learned_garment_out(body_model: BodyModel,
                                                       synthetic_body: BodyModel,
                                                       tmp_path: Path) -> None:  # fmt: skip
