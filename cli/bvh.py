@@ -73,8 +73,8 @@ def import_bvh(
     no_mesh: bool,
     as_json: bool,
 ) -> None:
-    """Retarget a BVH motion capture (CMU, Mixamo or SMPL joint names) to the SMPL skeleton and
-    write it as a USD body layer (Y-up, metres)."""
+    """Retarget a BVH motion capture (CMU, Mixamo or SMPL joint names; .bvh, or compressed
+    .bvh.xz / .bvh.gz) to the SMPL skeleton and write it as a USD body layer (Y-up, metres)."""
     frame_range, beta_values = parse_frames(frames), parse_betas(betas)
     with user_errors():
         if not bvh.is_file():
