@@ -499,6 +499,11 @@ def _not_xz(tmp: Path) -> Path:
     return write(tmp / "walk.bvh.xz", CMU_CLIP.read_text()[:2000])
 
 
+def _cut_gz(tmp: Path) -> Path:
+    (tmp / "walk.bvh.gz").write_bytes(gzip.compress(CMU_CLIP.read_bytes())[:5000])
+    return tmp / "walk.bvh.gz"
+
+
 def _truncated(tmp: Path) -> Path:
     lines = CMU_CLIP.read_text().splitlines()
     start = next(i for i, line in enumerate(lines) if line.startswith("Frame Time"))
@@ -534,11 +539,12 @@ def _armless(tmp: Path) -> Path:
         (lambda t: write(t / "nan.bvh", bvh_text(cmu_skeleton(), {}, np.full((2, 3), np.nan))),
          "NaN"),
         (lambda t: t / "missing.bvh", "missing.bvh: no such file"),
-        (_not_xz, "walk.bvh.xz: not a xz-compressed file"),
+        (_not_xz, "walk.bvh.xz: not a valid xz-compressed file"),
+        (_cut_gz, "walk.bvh.gz: not a valid gzip-compressed file"),
     ],
     ids=["text", "binary", "empty", "truncated", "armless", "no-motion", "open-hierarchy",
          "zero-frame-time",
-         "nan", "missing", "not-xz"],
+         "nan", "missing", "not-xz", "cut-gz"],
 )  # fmt: skip
 def test_bad_input_gives_one_line_and_no_output(
     tmp_path: Path, make: Callable[[Path], Path], expected: str

@@ -37,10 +37,12 @@ import gzip
 import lzma
 import math
 import re
-from collections.abc import Sequence
+import zlib
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from itertools import pairwise
 from pathlib import Path
+from typing import IO
 
 import numpy as np
 import torch
@@ -247,8 +249,13 @@ class BvhRetarget:
 # Parsing
 
 
+#: A compressed format: its name, its reader and the errors that a broken file raises.
+Compression = tuple[str, Callable[..., IO[bytes]], tuple[type[Exception], ...]]
 #: Compressed BVH files :func:`read_bvh` opens, by their last suffix (``walk.bvh.xz``).
-COMPRESSED_SUFFIXES: dict[str, type[Exception]] = {".xz": lzma.LZMAError, ".gz": gzip.BadGzipFile}
+COMPRESSED_SUFFIXES: dict[str, Compression] = {
+    ".xz": ("xz", lzma.open, (lzma.LZMAError, EOFError)),
+    ".gz": ("gzip", gzip.open, (gzip.BadGzipFile, zlib.error, EOFError)),
+}
 
 
 def is_bvh_path(path: str | Path) -> bool:
@@ -269,14 +276,13 @@ def read_bvh(path: str | Path) -> BvhClip:
         OSError: the file cannot be read.
     """
     path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix in COMPRESSED_SUFFIXES:
-        opener = lzma.open if suffix == ".xz" else gzip.open
+    if path.suffix.lower() in COMPRESSED_SUFFIXES:
+        name, opener, errors = COMPRESSED_SUFFIXES[path.suffix.lower()]
         try:
             with opener(path, "rb") as stream:
                 data = stream.read()
-        except (COMPRESSED_SUFFIXES[suffix], EOFError) as exc:
-            raise BvhError(f"{path}: not a {suffix[1:]}-compressed file ({exc})") from None
+        except errors as exc:
+            raise BvhError(f"{path}: not a valid {name}-compressed file ({exc})") from None
     else:
         data = path.read_bytes()
     try:
