@@ -111,21 +111,28 @@ def project(
             garment, lod, splits = layers.garment, layers.lod, layers.splits
         elif not sim_layers or not body_layers:
             raise click.UsageError("give SIM_LAYER... and --body, or --manifest")
+    before = output.stat().st_mtime_ns if output.is_file() else None
     with FrameProgress("project") as bar, user_errors():
         data = project_layers(
             sim_layers, body_layers, output, garment=garment, lod=lod,
             body_model=body_model, fields=fields, settings=settings, splits=splits,
             workers=workers, update=update, on_read=bar.on_read, progress=bar.progress,
         )  # fmt: skip
-    seconds = float(data.metadata["seconds"])
-    wall = float(data.metadata["wall_seconds"])
-    frames = len(data.canonical)
+    run = data.metadata["last_run"]
+    if run["sequences"]:
+        wall, frames = float(run["wall_seconds"]), int(run["frames"])
+        rate, alone = frames / max(wall, 1e-9), frames / max(float(run["seconds"]), 1e-9)
+        done = (
+            f"{run['sequences']} sequence(s), {frames} frames projected in {wall:.1f} s with "
+            f"{run['workers']} worker(s) ({rate:.2f} frames/s; projection alone {alone:.2f} "
+            "frames/s per worker)"
+        )
+    else:
+        done = "no layer new to it"
     mean_mm, max_mm = 1e3 * float(np.mean(data.error)), 1e3 * float(np.max(data.max_error))
     click.echo(
-        f"{data.num_sequences} sequences, {frames} frames in {wall:.1f} s with {workers} "
-        f"worker(s) ({frames / max(wall, 1e-9):.2f} frames/s; projection alone "
-        f"{frames / max(seconds, 1e-9):.2f} frames/s per worker); reprojection error mean "
-        f"{mean_mm:.2f} mm, max {max_mm:.2f} mm"
+        f"{done}; the set: {data.num_sequences} sequences, {len(data.canonical)} frames, "
+        f"reprojection error mean {mean_mm:.2f} mm, max {max_mm:.2f} mm"
     )
     if data.flagged is None:
         click.echo("frames the simulation flagged: not recorded (a layer of the set is gone)")
@@ -134,4 +141,7 @@ def project(
         sequences = sum(bool(np.any(data.flagged[data.sequence(s)]))
                         for s in range(data.num_sequences))  # fmt: skip
         click.echo(f"frames the simulation flagged: {flagged} in {sequences} sequence(s)")
-    click.echo(f"wrote {output}")
+    if before is None or output.stat().st_mtime_ns != before:
+        click.echo(f"wrote {output}")
+    else:
+        click.echo(f"{output} left as it was")

@@ -251,10 +251,18 @@ def test_project_update_appends_only_new_layers(tmp_path, body, template, motion
     common = ["--body", str(body_path), "-o", str(out), "--lod", "low", "--iterations", "3"]
     result = CliRunner().invoke(main, ["project", str(first), *common])
     assert result.exit_code == 0, result.output
+    assert f"1 sequence(s), {FRAMES} frames projected in" in result.output
     before = load_canonical_set(out)
     result = CliRunner().invoke(main, ["project", str(first), str(second), "--update", *common])
     assert result.exit_code == 0, result.output
+    # The line says what this run did, then what the set holds; the set's times add up.
+    assert f"1 sequence(s), {FRAMES} frames projected in" in result.output
+    assert f"the set: 2 sequences, {2 * FRAMES} frames" in result.output
+    assert f"wrote {out}" in result.output
     after = load_canonical_set(out)
+    run = after.metadata["last_run"]
+    assert (run["sequences"], run["frames"], run["workers"]) == (1, FRAMES, 1)  # one sequence
+    assert after.metadata["seconds"] == before.metadata["seconds"] + run["seconds"]
     assert after.sources == [str(first), str(second)] and after.splits == ["train", "train"]
     np.testing.assert_array_equal(after.canonical[after.sequence(0)], before.canonical)
     np.testing.assert_allclose(after.canonical[after.sequence(1)], before.canonical, atol=1e-5)
@@ -263,6 +271,8 @@ def test_project_update_appends_only_new_layers(tmp_path, body, template, motion
     written = out.read_bytes()
     result = CliRunner().invoke(main, ["project", str(second), "--update", *common])
     assert result.exit_code == 0 and out.read_bytes() == written, result.output
+    assert "no layer new to it; the set: 2 sequences" in result.output
+    assert f"{out} left as it was" in result.output and "wrote" not in result.output
     other = [*common[:-1], "4"]
     result = CliRunner().invoke(main, ["project", str(first), "--update", *other])
     assert result.exit_code != 0 and "projection settings" in result.output, result.output

@@ -176,6 +176,7 @@ def project_layers(
             kept.flagged = _flags_of_sources(kept)
         new = [k for k, sim in enumerate(sim_layers) if str(Path(sim)) not in kept.sources]
         if not new:
+            kept.metadata["last_run"] = _run_record(0, 0, 0.0, started, workers)
             if not recorded and kept.flagged is not None:
                 save_canonical_set(output, kept)
             return kept
@@ -257,12 +258,31 @@ def project_layers(
             "usd_garment_version": __version__,
         },
     )
+    data.metadata["last_run"] = _run_record(
+        len(inputs), total, data.metadata["seconds"], started, min(workers, len(tasks))
+    )
     if kept is not None:
         for key in ("seconds", "wall_seconds"):
             data.metadata[key] += float(kept.metadata.get(key, 0.0))
         data = concat_canonical_sets(kept, data)
     save_canonical_set(output, data)
     return data
+
+
+def _run_record(
+    sequences: int, frames: int, seconds: float, started: float, workers: int
+) -> dict[str, float | int]:
+    """What one call projected: ``sequences`` and ``frames`` (0 when it found nothing new),
+    ``seconds`` of projection summed over its workers, its wall time since ``started``
+    (``time.perf_counter``) and the ``workers`` it ran (one process per sequence at most). The
+    set's ``seconds`` and ``wall_seconds`` sum every call that added to it."""
+    return {
+        "sequences": sequences,
+        "frames": frames,
+        "seconds": seconds,
+        "wall_seconds": time.perf_counter() - started,
+        "workers": workers,
+    }
 
 
 def _flags_of_sources(data: CanonicalSet) -> np.ndarray | None:
