@@ -26,6 +26,7 @@ import torch
 from usd_garment.body import load_body_model
 from usd_garment.eval.render import CLOTH, SKIN, draw_meshes, view_axes
 from usd_garment.garment.library import load_template
+from usd_garment.garment.mesh_ops import face_edges
 from usd_garment.methods.simulation import shape_offsets
 from usd_garment.sim.checks import edge_lengths, unique_edges
 from usd_garment.usd.garment_read import read_garment_layer
@@ -35,11 +36,6 @@ VIEWS = (("front", 0.0), ("back", 180.0))
 RED = (0.9, 0.1, 0.1)
 #: Margin around the red triangles in a zoomed view (m).
 MARGIN = 0.15
-
-
-def triangle_edges(faces: np.ndarray) -> np.ndarray:
-    """``(3F, 2)`` the three edges of each triangle of ``faces`` ``(F, 3)``, face by face."""
-    return faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
 
 
 def main() -> None:
@@ -59,6 +55,9 @@ def main() -> None:
     rest = template.vertices + shape_offsets(body, template.vertices, motion.betas)
     edges = unique_edges(template.faces)
     rest_lengths = edge_lengths(rest, edges)
+    # Each layer's triangle edges and their rest lengths, face by face (for the red faces).
+    corners = [face_edges(faces) for _, faces, _ in layers]
+    rest_corners = [edge_lengths(rest, c) for c in corners]
     for path, (points, _, _) in zip(args.garments, layers, strict=True):
         largest = (edge_lengths(points, edges) / rest_lengths).max(axis=1)
         print(f"{path}: largest edge {largest.max():.2f}x, frames with an edge above "
@@ -74,8 +73,7 @@ def main() -> None:
         right, _ = view_axes(view)
         red = []  # the red vertices of every layer: each column zooms on the same box
         for row, (path, (points, faces, _)) in enumerate(zip(args.garments, layers, strict=True)):
-            corners = triangle_edges(faces)
-            stretch = edge_lengths(points[t], corners) / edge_lengths(rest, corners)
+            stretch = edge_lengths(points[t], corners[row]) / rest_corners[row]
             over = stretch.reshape(-1, 3).max(axis=1) > args.ratio
             red.append(points[t][np.unique(faces[over])])
             ax = axes[row, col]

@@ -10,9 +10,15 @@ from scipy import sparse
 from scipy.sparse.csgraph import connected_components
 
 
+def face_edges(faces: np.ndarray) -> np.ndarray:
+    """``(3F, 2)`` the directed edges of each triangle of ``faces`` ``(F, 3)``, face by face:
+    (a, b), (b, c), (c, a)."""
+    return faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+
+
 def edge_face_counts(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unique undirected edges ``(E, 2)`` (sorted pairs) and how many faces use each ``(E,)``."""
-    e = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    e = np.sort(face_edges(faces), axis=1)
     edges, counts = np.unique(e, axis=0, return_counts=True)
     return edges, counts
 
@@ -79,7 +85,7 @@ def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
     Raises:
         ValueError: a vertex starts more than one boundary edge (the boundary is not manifold).
     """
-    directed = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    directed = face_edges(faces)
     key = directed[:, 0] * (faces.max() + 1) + directed[:, 1]
     rkey = directed[:, 1] * (faces.max() + 1) + directed[:, 0]
     boundary = directed[~np.isin(key, rkey)]
@@ -105,8 +111,7 @@ def fix_boundary(faces: np.ndarray) -> np.ndarray:
     vertices that start more than one boundary edge (bow ties). Returns the kept faces.
     """
     while True:
-        directed = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 3, 2)
-        flat = directed.reshape(-1, 2)
+        flat = face_edges(faces)
         n = faces.max() + 1
         key = flat[:, 0] * n + flat[:, 1]
         is_b = ~np.isin(key, flat[:, 1] * n + flat[:, 0])
@@ -169,7 +174,7 @@ def relax(
     """
     v = np.array(vertices, dtype=np.float64)
     n = len(v)
-    e = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    e = face_edges(faces)
     adj = sparse.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)).tocsr()
     adj = ((adj + adj.T) > 0).astype(np.float64)
     loops = boundary_loops(faces)

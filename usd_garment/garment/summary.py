@@ -13,6 +13,7 @@ from usd_garment.garment.mesh_ops import (
     boundary_loops,
     edge_face_counts,
     face_components,
+    face_edges,
     vertex_normals,
 )
 from usd_garment.garment.template import GarmentTemplate
@@ -54,7 +55,7 @@ def garment_summary(template: GarmentTemplate, body: BodyModel) -> dict[str, Any
     sd, closest = clearance(v, body_v, body_f)
     edges, counts = edge_face_counts(f)
     length = np.linalg.norm(v[edges[:, 0]] - v[edges[:, 1]], axis=1)
-    directed = f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    directed = face_edges(f)
     outward = (vertex_normals(v, f) * (v - closest)).sum(1) > 0
     return {
         "name": template.name,
