@@ -176,7 +176,7 @@ def project_layers(
             kept.flagged = _flags_of_sources(kept)
         new = [k for k, sim in enumerate(sim_layers) if str(Path(sim)) not in kept.sources]
         if not new:
-            kept.metadata["last_run"] = _run_record(0, 0, 0.0, started, workers)
+            kept.metadata["last_run"] = _run_record(0, 0, 0.0, started, 0)
             if not recorded and kept.flagged is not None:
                 save_canonical_set(output, kept)
             return kept

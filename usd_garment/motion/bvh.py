@@ -276,8 +276,9 @@ def read_bvh(path: str | Path) -> BvhClip:
         OSError: the file cannot be read.
     """
     path = Path(path)
-    if path.suffix.lower() in COMPRESSED_SUFFIXES:
-        name, opener, errors = COMPRESSED_SUFFIXES[path.suffix.lower()]
+    compression = COMPRESSED_SUFFIXES.get(path.suffix.lower())
+    if compression is not None:
+        name, opener, errors = compression
         try:
             with opener(path, "rb") as stream:
                 data = stream.read()
