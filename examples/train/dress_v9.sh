@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The shipped dress model's recipe (version 9, docs/learning.md "Training"), run from nothing on
-# the canonical sets that examples/train/dress_data.sh makes:
+# the canonical sets that examples/train/data.sh dress makes:
 #
 #   bash examples/train/dress_v9.sh MODEL_DIR [DATA]    # DATA: scratch by default
 #
