@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from tests.script_calls import script_calls
 from usd_garment.body.model import BodyModel
 from usd_garment.cli.main import main
 from usd_garment.methods.simulation import SimulationError
@@ -352,56 +353,39 @@ def test_a_manifest_made_before_an_option_existed_resumes_as_it_was(option: str)
 
 @pytest.mark.parametrize("garment", ["tshirt", "dress"])
 def test_the_data_script_makes_the_committed_sets(garment: str, tmp_path: Path) -> None:
-    """``examples/train/data.sh GARMENT`` makes each set with the settings its committed
-    manifest (``docs/datasets/GARMENT_NAME_manifest.json``) records: its ``dataset make``
-    commands, read by the command's own parser, run against a stand-in ``usd-garment`` that
-    logs its arguments, then projects them onto the canonical sets."""
-    root = Path(__file__).parent.parent
-    log = tmp_path / "calls.jsonl"
-    fake = tmp_path / "bin" / "usd-garment"
-    fake.parent.mkdir()
-    fake.write_text(
-        f"#!{sys.executable}\nimport json, pathlib, sys\n"
-        f"with open({str(log)!r}, 'a') as f: f.write(json.dumps(sys.argv[1:]) + '\\n')\n"
-        "if sys.argv[1] == 'project': pathlib.Path(sys.argv[sys.argv.index('-o') + 1]).touch()\n"
-    )
-    fake.chmod(0o755)
-    env = {**os.environ, "PATH": f"{fake.parent}{os.pathsep}{os.environ['PATH']}"}
-    out = tmp_path / "data"
-    script = root / "examples" / "train" / "data.sh"
-    subprocess.run(["bash", str(script), garment, str(out)], env=env, check=True, cwd=root)
-    calls = [json.loads(line) for line in log.read_text().splitlines()]
-
+    """``examples/train/data.sh GARMENT`` imports the captures and makes each set with the
+    settings its committed manifest (``docs/datasets/GARMENT_NAME_manifest.json``) records (its
+    ``dataset make`` lines read by the command's own parser), then projects the sets onto the
+    two canonical sets."""
     from usd_garment.cli.dataset import make
 
+    calls = script_calls("data.sh", garment, tmp_path=tmp_path)
     made = []
+    manifests = Path(__file__).parent.parent / "docs" / "datasets"
     for args in calls:
         if args[:2] != ["dataset", "make"]:
             continue
         params = make.make_context("make", args[2:]).params
         name = params["output"].name.removeprefix(f"dataset_{garment}_")
         made.append(name)
-        manifest = root / "docs" / "datasets" / f"{garment}_{name}_manifest.json"
-        committed = json.loads(manifest.read_text())["config"]
-        assert params["garment"] == committed["garment"] == garment
-        keys = ("motions", "shapes", "frames", "seed", "shape_sigma", "train_only",
+        committed = json.loads((manifests / f"{garment}_{name}_manifest.json").read_text())
+        config = committed["config"]
+        keys = ("garment", "motions", "shapes", "frames", "seed", "shape_sigma", "train_only",
                 "open_shoulders", "capture_shapes", "lod", "substeps", "iterations")  # fmt: skip
         for key in keys:
-            assert params[key] == committed[key], (name, key)
-        assert params["shape_per_motion"] == committed.get("shape_per_motion", False), name
-        captures = [(Path(text.rsplit(":", 1)[0]).stem, text.rsplit(":", 1)[1])
-                    for text in params["captures"]]  # fmt: skip
-        assert captures == [(Path(path).stem, split) for path, split in committed["captures"]]
+            assert params[key] == config[key], (name, key)
+        assert params["shape_per_motion"] == config.get("shape_per_motion", False), name
+        assert [text.rsplit(":", 1) for text in params["captures"]] == config["captures"], name
     extra = ["v5s"] if garment == "tshirt" else ["v5s", "v6s"]
     assert made == ["v4", "v4x", "cmu4", *extra]
-    projected = [(Path(a[a.index("--manifest") + 1]).name, Path(a[a.index("-o") + 1]).name)
+    cmu4 = json.loads((manifests / f"{garment}_cmu4_manifest.json").read_text())
+    imported = [a[a.index("-o") + 1] for a in calls if a[0] == "import-bvh"]
+    assert imported == [path for path, _ in cmu4["config"]["captures"]]
+    projected = [(a[a.index("--manifest") + 1], a[a.index("-o") + 1])
                  for a in calls if a[0] == "project"]  # fmt: skip
     last = "v4cs" if garment == "tshirt" else "v4css"
-    first = [(f"dataset_{garment}_{n}", f"canonical_{garment}_v4c.npz") for n in made[:3]]
-    then = [(f"dataset_{garment}_{n}", f"canonical_{garment}_{last}.npz") for n in extra]
+    first = [(f"scratch/dataset_{garment}_{n}", f"scratch/canonical_{garment}_v4c.npz")
+             for n in made[:3]]  # fmt: skip
+    then = [(f"scratch/dataset_{garment}_{n}", f"scratch/canonical_{garment}_{last}.npz")
+            for n in extra]  # fmt: skip
     assert projected == first + then
-    imported = [Path(a[a.index("-o") + 1]) for a in calls if a[0] == "import-bvh"]
-    cmu4 = json.loads((root / "docs" / "datasets" / f"{garment}_cmu4_manifest.json").read_text())
-    assert [path.relative_to(out).as_posix() for path in imported] == [
-        Path(path).relative_to("scratch").as_posix() for path, _ in cmu4["config"]["captures"]
-    ]

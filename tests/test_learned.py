@@ -14,6 +14,7 @@ import pytest
 import torch
 from click.testing import CliRunner
 
+from tests.script_calls import script_calls
 from usd_garment.body.fingerprint import model_fingerprint
 from usd_garment.body.model import BodyModel
 from usd_garment.canonical.dataset import CanonicalSet, save_canonical_set
@@ -315,27 +316,56 @@ def test_the_shipped_members_were_trained_with_the_committed_settings(garment: s
     assert len(named) == 3  # one file per member
 
 
-def test_the_dress_recipe_script_starts_from_the_shipped_members_settings() -> None:
-    """``examples/train/dress_v9.sh`` trains each member's pose code and VAE with
-    ``dress_v9_step1_member{m}.json``: the settings that the shipped dress's member m records
-    for those stages, its regressor (trained again from nothing on the larger set) on 30-frame
-    crops with the member's seed."""
+@pytest.mark.parametrize("garment", ["tshirt", "dress"])
+def test_the_recipe_script_trains_the_shipped_members_steps(garment: str, tmp_path: Path) -> None:
+    """``examples/train/recipe.sh GARMENT`` trains each member's pose code and VAE with
+    settings equal to what the shipped member records for those stages (its first regressor on
+    30-frame crops with the member's seed, no fine-tuning), then each regressor step from a copy
+    of the step before (the folder that the step's settings start from), the last with the file
+    that the shipped member's command names; then joins the three members with the shipped
+    model's latent smoothing."""
     from usd_garment.methods.learned import shipped_model
     from usd_garment.training.pipeline import TrainSettings
 
-    folder = shipped_model("dress")
+    folder = shipped_model(garment)
     assert folder is not None
-    root = Path(__file__).parent.parent
-    for m, member in enumerate(load_learned_model(folder).members):
-        assert f"examples/train/dress_v9_member{m}.json" in member.info["command"]
-        path = root / "examples" / "train" / f"dress_v9_step1_member{m}.json"
-        step1 = TrainSettings.from_dict(json.loads(path.read_text()))
-        step1.set_device("cpu")
-        recorded = TrainSettings.from_dict(member.info["training"]["settings"])
-        assert step1.to_dict()["pose"] == recorded.to_dict()["pose"]
-        assert step1.to_dict()["vae"] == recorded.to_dict()["vae"]
+    model = load_learned_model(folder)
+    calls = script_calls("recipe.sh", garment, "MODEL", tmp_path=tmp_path)
+    work = tmp_path / "work"
+
+    def settings(path: str) -> TrainSettings:
+        loaded = TrainSettings.from_dict(json.loads((work / path).read_text()))
+        loaded.set_device("cpu")
+        return loaded
+
+    last_steps = []
+    for m, member in enumerate(model.members):
+        recorded = TrainSettings.from_dict(member.info["training"]["settings"]).to_dict()
+        first = calls.pop(0)
+        assert first[:2] == ["train", "all"] and first[first.index("--config") + 1].endswith(
+            f"{m}.json"
+        )
+        step1 = settings(first[first.index("--config") + 1])
+        assert step1.to_dict()["pose"] == recorded["pose"]
+        assert step1.to_dict()["vae"] == recorded["vae"]
         assert (step1.regressor.crop_length, step1.regressor.seed) == (30, m)
         assert step1.regressor.init_from is None and step1.regressor.lambda_posed == 0
+        before = first[first.index("--out") + 1]
+        while calls[0][:2] == ["train", "regressor"]:
+            step = calls.pop(0)
+            out = step[step.index("--out") + 1]
+            if "--config" in step:
+                config = step[step.index("--config") + 1]
+                start = settings(config).regressor.init_from
+                assert start in (None, before), (config, before)
+                assert settings(config).regressor.seed == m
+            before = out
+        last_steps.append(before)
+        assert f"--config {config}" in member.info["command"]
+    (combine,) = calls
+    assert combine[:2] == ["train", "combine"] and combine[2:5] == last_steps
+    smoothing = float(combine[combine.index("--latent-smoothing") + 1])
+    assert smoothing == model.latent_smoothing
 
 
 def test_final_quality_pushes_the_learned_garment_out(body_model: BodyModel,

@@ -1,0 +1,69 @@
+#!/usr/bin/env bash
+# A shipped model's training recipe, run from nothing on the canonical sets that
+# examples/train/data.sh makes (docs/learning.md, "Training"):
+#
+#   bash examples/train/recipe.sh tshirt|dress MODEL_DIR [DATA]    # DATA: scratch by default
+#
+# Each of the three members: pose code, VAE and a first regressor on the set v4c (train all, the
+# garment's step-1 settings with 30-frame crops), then its regressor trained again from nothing
+# on the larger set, then fine-tuned end to end with the posed collision term and the decoder
+# tuned; the members joined.
+#   tshirt (version 6, stop 38): tshirt_T30 → tshirt_J0 on v4cs → tshirt_J1 (λ 0.45, 30 epochs)
+#                                → tshirt_J (λ 1.5, 60 epochs); no latent smoothing
+#   dress (version 9, stop 39):  dress_D30 → dress_L0 on v4css → dress_L (λ 7.7, 30 epochs);
+#                                0.1 s latent smoothing
+# The run folders go to scratch/runs/GARMENT_STEP_m{0,1,2} (the settings' init_from name them);
+# a step whose run folder holds its result is skipped, so an interrupted run goes on where it
+# stopped. Run it from the repository root. DEVICE=cuda trains on a GPU; VERSION names the joined
+# model; TRAIN_ARGS is added to every train command (e.g. TRAIN_ARGS="--epochs pose=1 --epochs
+# vae=1 --epochs regressor=1" for a quick try).
+set -euo pipefail
+
+GARMENT=${1:?usage: recipe.sh tshirt|dress MODEL_DIR [DATA]}
+MODEL=${2:?usage: recipe.sh tshirt|dress MODEL_DIR [DATA]}
+DATA=${3:-scratch}
+# STEPS: the regressor's steps after the first, NAME:SETTINGS:PLANES (SETTINGS empty: the run
+# folder's own; PLANES: with the posed planes)
+case $GARMENT in
+    tshirt) FIRST=tshirt_member START=T30 SET=v4cs SMOOTHING=0.0
+        STEPS="J0:tshirt_member: J1:tshirt_v6_step1_member:planes J:tshirt_v6_member:planes" ;;
+    dress) FIRST=dress_v9_step1_member START=D30 SET=v4css SMOOTHING=0.1
+        STEPS="L0:: L:dress_v9_member:planes" ;;
+    *) echo "recipe.sh: the garment is tshirt or dress, not '$GARMENT'" >&2; exit 2 ;;
+esac
+DEVICE=${DEVICE:-cpu}
+read -r -a EXTRA <<<"${TRAIN_ARGS:-}"
+RUNS=scratch/runs
+HERE=$(dirname "$0")
+PLANES=$DATA/planes_canonical_${GARMENT}_$SET.npz
+mkdir -p "$RUNS"
+
+# again FROM TO: a copy of run folder FROM whose regressor is to be trained again
+again() {
+    rm -rf "$2"
+    cp -r "$1" "$2"
+    rm -f "$2/checkpoints/regressor.pt" "$2/.done"
+}
+
+for m in 0 1 2; do
+    run=$RUNS/${GARMENT}_${START}_m$m
+    if [ ! -f "$run/model.json" ]; then  # written once all three stages are
+        usd-garment train all --data "$DATA/canonical_${GARMENT}_v4c.npz" --out "$run" \
+            --device "$DEVICE" --config "$HERE/$FIRST$m.json" --resume "${EXTRA[@]}"
+    fi
+    for step in $STEPS; do
+        IFS=: read -r name settings planes <<<"$step"
+        from=$run
+        run=$RUNS/${GARMENT}_${name}_m$m
+        [ -f "$run/.done" ] && continue
+        again "$from" "$run"
+        args=()
+        [ -n "$settings" ] && args+=(--config "$HERE/$settings$m.json")
+        [ -n "$planes" ] && args+=(--planes "$PLANES")
+        usd-garment train regressor --data "$DATA/canonical_${GARMENT}_$SET.npz" --out "$run" \
+            --device "$DEVICE" "${args[@]}" "${EXTRA[@]}"
+        touch "$run/.done"
+    done
+done
+usd-garment train combine "$RUNS/${GARMENT}_${name}"_m{0,1,2} --out "$MODEL" \
+    --latent-smoothing $SMOOTHING --version "${VERSION:-retrained}"
