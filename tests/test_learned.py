@@ -94,6 +94,16 @@ def test_train_then_dress(body_model: BodyModel, synthetic_body: BodyModel, tmp_
     assert info["command"].startswith("usd-garment train all")
     assert load_learned_model(model, body_model).members[0].vae.num_vertices == 1015
 
+    # a resume that finds every stage done keeps the time its epochs took
+    code, output = _run(["train", "all", "--data", data, "--out", model, "--config", config,
+                         "--resume"])  # fmt: skip
+    assert code == 0, output
+    seconds = json.loads((model / "model.json").read_text())["training"]["seconds"]
+    for stage in ("pose", "vae", "regressor"):
+        record = json.loads((model / f"{stage}.json").read_text())
+        assert record["resumed_epochs"] == 2 and seconds[stage] == record["seconds"]
+        assert record["seconds"] >= sum(row["seconds"] for row in record["history"]["epochs"])
+
     body = tmp_path / "walk.usda"  # 60 fps, so the networks' 30 fps is resampled both ways
     write_body_layer(body, make_motion("walk", 9, 60.0, seed=5, body=body_model), body_model)
     out = tmp_path / "walk_tshirt.usdc"

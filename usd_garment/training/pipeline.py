@@ -173,7 +173,9 @@ def train_stage(
     too, with its decoder as the training left it (its record gains ``tuned_with_regressor``).
 
     Returns:
-        The stage's record: ``stage``, ``config``, ``architecture``, ``history``, ``seconds``.
+        The stage's record: ``stage``, ``config``, ``architecture``, ``history``, ``seconds``
+        (this run's wall time, plus the epochs' time of the runs it resumed) and
+        ``resumed_epochs`` (the epochs that the resumed checkpoint held; 0 for a fresh run).
 
     Raises:
         FileNotFoundError: an earlier stage it needs is missing.
@@ -192,6 +194,7 @@ def train_stage(
             progress(stage, epoch, total, row)
 
     started = time.perf_counter()
+    earlier = _checkpoint_epochs(checkpoint) if resume else []
     net: torch.nn.Module
     if stage == "pose":
         config: Any = settings.pose
@@ -240,10 +243,20 @@ def train_stage(
         "config": config.to_dict() if hasattr(config, "to_dict") else asdict(config),
         "architecture": net.config(),
         "history": history,
-        "seconds": time.perf_counter() - started,
+        "seconds": time.perf_counter() - started + sum(row["seconds"] for row in earlier),
+        "resumed_epochs": len(earlier),
     }
     _save_stage(folder, stage, net, record)
     return record
+
+
+def _checkpoint_epochs(checkpoint: Path) -> list[dict[str, Any]]:
+    """The history rows (one an epoch, with its ``seconds``) of the epochs that the stage's
+    ``checkpoint`` holds: those an earlier run trained; none without a checkpoint."""
+    if not checkpoint.is_file():
+        return []
+    state = torch.load(checkpoint, map_location="cpu", weights_only=True)
+    return list(state["history"]["epochs"])
 
 
 def assemble_model(
