@@ -85,6 +85,7 @@ def _command_line(
     config_path: Path | None,
     ablation: str | None,
     epochs: tuple[str, ...],
+    planes_path: Path | None,
 ) -> str:
     """The ``usd-garment train`` command that trains the same model (recorded in it)."""
     words = ["train", "all" if len(stages) > 1 else stages[0], "--data", str(data)]
@@ -95,6 +96,8 @@ def _command_line(
         words += ["--ablation", ablation]
     for text in epochs:
         words += ["--epochs", text]
+    if planes_path is not None:
+        words += ["--planes", str(planes_path)]
     return "usd-garment " + shlex.join(words)
 
 
@@ -160,7 +163,9 @@ def _run(
         plot_curves(records, out / CURVES_NAME)
         click.echo(f"wrote {out / CURVES_NAME}, log {out / LOG_NAME}")
         if len(records) == len(STAGES):
-            command = _command_line(stages, data, out, device, config_path, ablation, epochs)
+            command = _command_line(
+                stages, data, out, device, config_path, ablation, epochs, planes_path
+            )
             assemble_model(out, canonical, body, settings, {"command": command})
             click.echo(f"wrote the model {out}")
 

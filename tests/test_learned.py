@@ -132,8 +132,13 @@ def test_train_then_dress(body_model: BodyModel, synthetic_body: BodyModel, tmp_
     regressor = {**TINY["regressor"], "epochs": 1, "init_from": str(model), "lambda_posed": 1.0,
                  "tune_decoder": True}  # fmt: skip
     config.write_text(json.dumps({**TINY, "regressor": regressor}))
-    code, output = _run(["train", "regressor", "--data", data, "--out", tuned, "--config", config])
+    planes = tmp_path / "planes.npz"
+    code, output = _run(["train", "regressor", "--data", data, "--out", tuned, "--config", config,
+                         "--planes", planes])  # fmt: skip
     assert code == 0, output
+    assert planes.is_file()
+    command = json.loads((tuned / "model.json").read_text())["command"]
+    assert command.endswith(f"--config {config} --planes {planes}")  # the command that made it
     row = json.loads((tuned / "regressor.json").read_text())["history"]["epochs"][-1]
     assert row["train_posed"] >= 0 and row["train_vertex_mm"] > 0 and "val_posed_inside_pct" in row
     vae_record = json.loads((tuned / "vae.json").read_text())
