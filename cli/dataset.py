@@ -35,7 +35,13 @@ from usd_garment.cli.options import (
 from usd_garment.fields.body_fields import load_body_fields
 from usd_garment.garment.template import GARMENT_NAMES
 from usd_garment.sim.material import ClothMaterial
-from usd_garment.training.data_quality import GROUPINGS, GroupQuality, dataset_quality
+from usd_garment.training.data_quality import (
+    GROUPINGS,
+    GroupQuality,
+    SequenceChange,
+    compare_manifests,
+    dataset_quality,
+)
 from usd_garment.training.dataset import (
     DATASET_KINDS,
     MANIFEST_NAME,
@@ -353,4 +359,46 @@ def _summary_table(rows: list[GroupQuality]) -> str:
             f"{r.bad_frames} "
             f"| {r.seconds / 60:.1f}"
         )
+    return "\n".join(lines)
+
+
+@dataset.command("compare")
+@click.argument("before", type=click.Path(exists=True, path_type=Path))
+@click.argument("now", type=click.Path(exists=True, path_type=Path))
+@json_option("Print every sequence's comparison as JSON.")
+def compare(before: Path, now: Path, as_json: bool) -> None:
+    """A dataset made again (NOW: its folder or manifest) against the manifest it had (BEFORE,
+    e.g. one committed in docs/datasets), sequence by sequence: the same simulation gives the
+    same checks (all but its time). The last line counts the sequences that came out the same."""
+    with user_errors():
+        rows = compare_manifests(read_manifest(before), read_manifest(now))
+    if as_json:
+        click.echo(json.dumps([row.to_json() for row in rows], indent=2))
+        return
+    click.echo(_compare_table(rows))
+
+
+def _compare_table(rows: list[SequenceChange]) -> str:
+    """One line per sequence (before → now), then the count of those that came out the same."""
+
+    def figures(checks: dict[str, Any]) -> str:
+        if not checks:
+            return "–"
+        largest = checks.get("stretch_max")
+        edge = "" if largest is None else f" ({largest:.2f})"
+        return (
+            f"{len(checks['retries'])} / {checks['bad_frames']}, "
+            f"{checks['stretch_p99_max']:.3f}{edge}"
+        )
+
+    lines = ["sequence | kind | status | retried / bad frames, stretch p99 max (largest edge): "
+             "before | now | verdict"]  # fmt: skip
+    for r in rows:
+        verdict = "same" if r.same else "changed: " + ", ".join(r.changed)
+        lines.append(
+            f"{r.name} | {r.kind} | {' → '.join(r.status)} | {figures(r.before)} | "
+            f"{figures(r.now)} | {verdict}"
+        )
+    same = sum(r.same for r in rows)
+    lines.append(f"{same} of {len(rows)} sequences came out the same")
     return "\n".join(lines)

@@ -1,5 +1,6 @@
 """``usd-garment dataset summary``: a manifest's simulation checks summed up per split, kind or
-sequence (frame-weighted means, worst frames, counts against the ground truth's targets)."""
+sequence (frame-weighted means, worst frames, counts against the ground truth's targets);
+``dataset compare``: a set made again against the manifest it had."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ import pytest
 from click.testing import CliRunner
 
 from usd_garment.cli.main import main
-from usd_garment.training.data_quality import dataset_quality
+from usd_garment.training.data_quality import compare_manifests, dataset_quality
 from usd_garment.training.dataset import MANIFEST_FORMAT, MANIFEST_NAME
 
 
@@ -82,3 +83,45 @@ def test_cli_table_json_and_errors(tmp_path: Path, manifest: dict[str, Any]) -> 
     result = runner.invoke(main, ["dataset", "summary", str(tmp_path / "missing")])
     assert result.exit_code != 0 and "no dataset manifest" in result.output
     assert "Traceback" not in result.output
+
+
+def test_compare_finds_the_sequences_that_changed(manifest: dict[str, Any]) -> None:
+    again = json.loads(json.dumps(manifest))
+    walk, walk1, run, capture = again["sequences"]
+    walk["checks"]["retries"] = {"12": 1}  # one frame fewer retried
+    walk1["seconds"] = 99.0  # time is not a figure of the simulation
+    run.update(status="ok", checks=dict(capture["checks"]))  # the bad run now finishes
+    del capture["checks"]["stretch_max"]  # a check one manifest lacks is not compared
+    capture["checks"]["stretch_p99_max"] = 1.25
+    again["sequences"] = [capture, walk, walk1, run]  # order: the new manifest's
+    rows = compare_manifests(manifest, again)
+    assert [(r.name, r.kind, r.changed) for r in rows] == [
+        ("c00_s0", "cmu_131_03", ()), ("m00_s0", "walk", ("retries",)),
+        ("m00_s1", "walk", ()), ("m01_s0", "run", ("status",)),
+    ]  # fmt: skip
+    assert rows[3].status == ("bad", "ok") and rows[3].before == {} and not rows[3].same
+    only_before = compare_manifests(manifest, {**again, "sequences": [walk]})
+    assert [(r.name, r.status) for r in only_before][-1] == ("c00_s0", ("ok", "absent"))
+
+
+def test_compare_cli_reads_a_committed_manifest_and_a_folder(tmp_path: Path) -> None:
+    """The dress's v4 as committed (stop 32) against its stop-41 remake with the snag check:
+    20 of 23 sequences the same (docs/learning.md, stop 41); the remake's folder reads as its
+    manifest file does."""
+    datasets = Path(__file__).parent.parent / "docs" / "datasets"
+    remade = tmp_path / "dataset_dress_v4"
+    remade.mkdir()
+    (remade / MANIFEST_NAME).write_text((datasets / "dress_v4_stop41_manifest.json").read_text())
+    runner = CliRunner()
+    result = runner.invoke(main, ["dataset", "compare", str(datasets / "dress_v4_manifest.json"),
+                                  str(remade)])  # fmt: skip
+    assert result.exit_code == 0, result.output
+    lines = result.output.splitlines()
+    assert lines[-1] == "20 of 23 sequences came out the same"
+    changed = [line.split(" | ")[0] for line in lines[1:-1] if "changed" in line]
+    assert changed == ["m08_s0", "m08_s1", "c00_s0"]
+    result = runner.invoke(main, ["dataset", "compare", str(remade), str(remade), "--json"])
+    assert all(row["same"] for row in json.loads(result.output))
+    result = runner.invoke(main, ["dataset", "compare", str(datasets.parent / "judge.md"),
+                                  str(remade)])  # fmt: skip
+    assert result.exit_code == 1 and "not a JSON manifest" in result.output

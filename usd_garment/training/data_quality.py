@@ -143,3 +143,70 @@ def dataset_quality(manifest: dict[str, Any], by: str = "split") -> list[GroupQu
         groups.setdefault(_KEYS[by](entry), []).append(entry)
     rows = [_group(name, entries) for name, entries in groups.items()]
     return [*rows, _group("all", list(manifest["sequences"]))]
+
+
+#: The checks that a simulation made again gives equal when it is the same simulation: all but
+#: its time. A check that one of the two manifests lacks (made before it was recorded) is not
+#: compared.
+SAME_CHECKS = (
+    "retries", "nan_frames", "bad_frames", "lead_in_bad_frames", "inside_forced_share_mean",
+    "inside_elsewhere_share_mean", "inside_elsewhere_share_max", "max_distance_m",
+    "stretch_p99_max", "stretch_max",
+)  # fmt: skip
+
+
+@dataclass(frozen=True)
+class SequenceChange:
+    """One sequence of a dataset made again, against the manifest it was made from before.
+
+    Attributes:
+        name: the sequence.
+        kind: its motion kind (a capture: its file's stem).
+        status: its status before and now ("absent" where a manifest lacks the sequence).
+        changed: the checks (:data:`SAME_CHECKS`) whose figures differ, and "status" when it
+            does; empty when the sequence came out the same.
+        before: its checks before (empty if none).
+        now: its checks now (empty if none).
+    """
+
+    name: str
+    kind: str
+    status: tuple[str, str]
+    changed: tuple[str, ...]
+    before: dict[str, Any]
+    now: dict[str, Any]
+
+    @property
+    def same(self) -> bool:
+        """Whether the sequence came out with the figures it had."""
+        return not self.changed
+
+    def to_json(self) -> dict[str, Any]:
+        """The comparison as plain JSON values."""
+        return {**asdict(self), "same": self.same}
+
+
+def compare_manifests(before: dict[str, Any], now: dict[str, Any]) -> list[SequenceChange]:
+    """Each sequence of a dataset made again (``now``) against the manifest it had
+    (``before``, e.g. the committed one): the same simulation gives the same figures.
+
+    Returns:
+        One comparison per sequence, in ``now``'s order, then those only ``before`` has.
+    """
+    old = {entry["name"]: entry for entry in before["sequences"]}
+    new = {entry["name"]: entry for entry in now["sequences"]}
+    rows = []
+    for name in [*new, *(n for n in old if n not in new)]:
+        a, b = old.get(name), new.get(name)
+        entry = b if b is not None else a
+        assert entry is not None
+        checks_a = (a or {}).get("checks") or {}
+        checks_b = (b or {}).get("checks") or {}
+        status = (a["status"] if a else "absent", b["status"] if b else "absent")
+        changed = ("status",) if status[0] != status[1] else ()
+        changed += tuple(
+            key for key in SAME_CHECKS
+            if key in checks_a and key in checks_b and checks_a[key] != checks_b[key]
+        )  # fmt: skip
+        rows.append(SequenceChange(name, _kind(entry), status, changed, checks_a, checks_b))
+    return rows

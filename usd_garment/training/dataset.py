@@ -351,12 +351,15 @@ def sequence_is_done(folder: Path, config: DatasetConfig, entry: dict[str, Any] 
 
 
 def read_manifest(folder: str | Path) -> dict[str, Any]:
-    """The manifest of the dataset in ``folder``.
+    """The manifest of the dataset in ``folder``, or the manifest file ``folder`` (a copy, as
+    those committed in ``docs/datasets``).
 
     Raises:
         FileNotFoundError: no manifest; ValueError: not a manifest.
     """
-    path = Path(folder) / MANIFEST_NAME
+    path = Path(folder)
+    if not path.is_file():
+        path = path / MANIFEST_NAME
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no dataset manifest")
     try:
