@@ -400,5 +400,7 @@ def _compare_table(rows: list[SequenceChange]) -> str:
             f"{figures(r.now)} | {verdict}"
         )
     same = sum(r.same for r in rows)
-    lines.append(f"{same} of {len(rows)} sequences came out the same")
+    pending = sum(r.status[1] == "pending" for r in rows)
+    lines.append(f"{same} of {len(rows)} sequences came out the same"
+                 + (f" ({pending} not made yet)" if pending else ""))  # fmt: skip
     return "\n".join(lines)

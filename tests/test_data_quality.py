@@ -120,6 +120,12 @@ def test_compare_cli_reads_a_committed_manifest_and_a_folder(tmp_path: Path) -> 
     assert lines[-1] == "20 of 23 sequences came out the same"
     changed = [line.split(" | ")[0] for line in lines[1:-1] if "changed" in line]
     assert changed == ["m08_s0", "m08_s1", "c00_s0"]
+    manifest = json.loads((remade / MANIFEST_NAME).read_text())
+    manifest["sequences"][0]["status"] = "pending"  # not simulated yet
+    (remade / MANIFEST_NAME).write_text(json.dumps(manifest))
+    result = runner.invoke(main, ["dataset", "compare", str(datasets / "dress_v4_manifest.json"),
+                                  str(remade)])  # fmt: skip
+    assert result.output.splitlines()[-1] == "19 of 23 sequences came out the same (1 not made yet)"
     result = runner.invoke(main, ["dataset", "compare", str(remade), str(remade), "--json"])
     assert all(row["same"] for row in json.loads(result.output))
     result = runner.invoke(main, ["dataset", "compare", str(datasets.parent / "judge.md"),
