@@ -26,9 +26,10 @@ if args[0] == "project":
 
 
 def script_calls(script: str, *args: str, tmp_path: Path) -> list[list[str]]:
-    """Run ``bash examples/train/SCRIPT ARGS...`` from a copy of the repository's
-    ``examples`` folder in ``tmp_path`` (so that its relative ``scratch/`` paths land there)
-    against the stand-in; return the arguments of each ``usd-garment`` call, in order."""
+    """Run ``bash examples/train/SCRIPT ARGS...`` in ``tmp_path / "work"``, which links to the
+    repository's ``examples`` folder (so that the script's relative ``scratch/`` paths land in
+    ``tmp_path``), against the stand-in; return the arguments of each ``usd-garment`` call, in
+    order."""
     log = tmp_path / "calls.jsonl"
     stand_in = tmp_path / "bin" / "usd-garment"
     stand_in.parent.mkdir()

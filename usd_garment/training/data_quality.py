@@ -145,14 +145,9 @@ def dataset_quality(manifest: dict[str, Any], by: str = "split") -> list[GroupQu
     return [*rows, _group("all", list(manifest["sequences"]))]
 
 
-#: The checks that a simulation made again gives equal when it is the same simulation: all but
-#: its time. A check that one of the two manifests lacks (made before it was recorded) is not
-#: compared.
-SAME_CHECKS = (
-    "retries", "nan_frames", "bad_frames", "lead_in_bad_frames", "inside_forced_share_mean",
-    "inside_elsewhere_share_mean", "inside_elsewhere_share_max", "max_distance_m",
-    "stretch_p99_max", "stretch_max",
-)  # fmt: skip
+#: The checks of a sequence that time its simulation: a simulation made again gives every other
+#: check equal when it is the same simulation.
+TIME_CHECKS = ("seconds_per_frame",)
 
 
 @dataclass(frozen=True)
@@ -163,8 +158,9 @@ class SequenceChange:
         name: the sequence.
         kind: its motion kind (a capture: its file's stem).
         status: its status before and now ("absent" where a manifest lacks the sequence).
-        changed: the checks (:data:`SAME_CHECKS`) whose figures differ, and "status" when it
-            does; empty when the sequence came out the same.
+        changed: the checks whose figures differ (all but :data:`TIME_CHECKS`, and only those
+            both manifests record: a check made before it was recorded is not compared), and
+            "status" first when it differs; empty when the sequence came out the same.
         before: its checks before (empty if none).
         now: its checks now (empty if none).
     """
@@ -205,8 +201,8 @@ def compare_manifests(before: dict[str, Any], now: dict[str, Any]) -> list[Seque
         status = (a["status"] if a else "absent", b["status"] if b else "absent")
         changed = ("status",) if status[0] != status[1] else ()
         changed += tuple(
-            key for key in SAME_CHECKS
-            if key in checks_a and key in checks_b and checks_a[key] != checks_b[key]
+            key for key in checks_b
+            if key not in TIME_CHECKS and key in checks_a and checks_a[key] != checks_b[key]
         )  # fmt: skip
         rows.append(SequenceChange(name, _kind(entry), status, changed, checks_a, checks_b))
     return rows
