@@ -101,6 +101,18 @@ def _command_line(
     return "usd-garment " + shlex.join(words)
 
 
+def _after_earlier(model_json: Path, command: str, trained: bool) -> str:
+    """The command to record for a run that trained some stages of a run folder whose other
+    stages earlier commands trained (e.g. the regressor again in a copy of a folder): those
+    commands, then this one (``trained``: it trained an epoch), or those alone (a resume that
+    found its stages finished). This one alone when the folder has no model yet."""
+    try:
+        earlier = str(json.loads(model_json.read_text(encoding="utf-8"))["command"])
+    except (FileNotFoundError, KeyError, TypeError, json.JSONDecodeError):
+        return command
+    return f"{earlier}; then {command}" if trained else earlier
+
+
 def _run(
     stages: tuple[str, ...],
     data: Path,
@@ -116,7 +128,7 @@ def _run(
         from usd_garment.body.io import load_body_model
         from usd_garment.canonical.dataset import load_canonical_set
         from usd_garment.fields.body_fields import load_body_fields
-        from usd_garment.methods.learned_model import CURVES_NAME, LOG_NAME
+        from usd_garment.methods.learned_model import CONFIG_NAME, CURVES_NAME, LOG_NAME
         from usd_garment.training.pipeline import (
             STAGES,
             assemble_model,
@@ -133,6 +145,7 @@ def _run(
         (out / "config.json").write_text(
             json.dumps(settings.to_dict(), indent=1) + "\n", encoding="utf-8"
         )
+        trained = 0  # epochs this run trained (a resume may find its stages finished)
         for stage in stages:
             planes = None
             if stage == "regressor" and settings.regressor.lambda_posed > 0:
@@ -152,6 +165,7 @@ def _run(
                 )  # fmt: skip
             finally:
                 bar.close()
+            trained += len(record["history"]["epochs"]) - record["resumed_epochs"]
             click.echo(f"{stage}: {len(record['history']['epochs'])} epochs in "
                        f"{record['seconds']:.1f} s")  # fmt: skip
         records = {}
@@ -166,6 +180,8 @@ def _run(
             command = _command_line(
                 stages, data, out, device, config_path, ablation, epochs, planes_path
             )
+            if len(stages) < len(STAGES):
+                command = _after_earlier(out / CONFIG_NAME, command, trained > 0)
             assemble_model(out, canonical, body, settings, {"command": command})
             click.echo(f"wrote the model {out}")
 

@@ -103,6 +103,11 @@ def test_train_then_dress(body_model: BodyModel, synthetic_body: BodyModel, tmp_
         record = json.loads((model / f"{stage}.json").read_text())
         assert record["resumed_epochs"] == 2 and seconds[stage] == record["seconds"]
         assert record["seconds"] >= sum(row["seconds"] for row in record["history"]["epochs"])
+    command = json.loads((model / "model.json").read_text())["command"]
+    code, output = _run(["train", "regressor", "--data", data, "--out", model, "--config", config,
+                         "--resume"])  # fmt: skip
+    assert code == 0, output  # it trained nothing: the record names no second command
+    assert json.loads((model / "model.json").read_text())["command"] == command
 
     body = tmp_path / "walk.usda"  # 60 fps, so the networks' 30 fps is resampled both ways
     write_body_layer(body, make_motion("walk", 9, 60.0, seed=5, body=body_model), body_model)
@@ -137,8 +142,11 @@ def test_train_then_dress(body_model: BodyModel, synthetic_body: BodyModel, tmp_
                          "--planes", planes])  # fmt: skip
     assert code == 0, output
     assert planes.is_file()
+    # the record names every command that made the folder's networks, the planes included
     command = json.loads((tuned / "model.json").read_text())["command"]
-    assert command.endswith(f"--config {config} --planes {planes}")  # the command that made it
+    first = json.loads((model / "model.json").read_text())["command"]
+    assert command.startswith(f"{first}; then usd-garment train regressor --data {data}")
+    assert command.endswith(f"--out {tuned} --device cpu --config {config} --planes {planes}")
     row = json.loads((tuned / "regressor.json").read_text())["history"]["epochs"][-1]
     assert row["train_posed"] >= 0 and row["train_vertex_mm"] > 0 and "val_posed_inside_pct" in row
     vae_record = json.loads((tuned / "vae.json").read_text())
