@@ -111,9 +111,8 @@ def project(
             garment, lod, splits = layers.garment, layers.lod, layers.splits
         elif not sim_layers or not body_layers:
             raise click.UsageError("give SIM_LAYER... and --body, or --manifest")
-    before = output.stat().st_mtime_ns if output.is_file() else None
     with FrameProgress("project") as bar, user_errors():
-        data = project_layers(
+        data, written = project_layers(
             sim_layers, body_layers, output, garment=garment, lod=lod,
             body_model=body_model, fields=fields, settings=settings, splits=splits,
             workers=workers, update=update, on_read=bar.on_read, progress=bar.progress,
@@ -141,7 +140,7 @@ def project(
         sequences = sum(bool(np.any(data.flagged[data.sequence(s)]))
                         for s in range(data.num_sequences))  # fmt: skip
         click.echo(f"frames the simulation flagged: {flagged} in {sequences} sequence(s)")
-    if before is None or output.stat().st_mtime_ns != before:
+    if written:
         click.echo(f"wrote {output}")
     else:
         click.echo(f"{output} left as it was")

@@ -120,7 +120,7 @@ def project_layers(
     update: bool = False,
     on_read: Callable[[int], None] | None = None,
     progress: Callable[[int], None] | None = None,
-) -> CanonicalSet:
+) -> tuple[CanonicalSet, bool]:
     """Project every simulated layer with the body motion of its body layer; write ``output``.
 
     Args:
@@ -144,6 +144,10 @@ def project_layers(
         on_read: called once with the total number of frames after all inputs are read.
         progress: called with the number of frames projected so far (after each chunk of
             frames with one worker, after each sequence with several).
+
+    Returns:
+        The set (``metadata["last_run"]``: what this run projected) and whether ``output`` was
+        written (not by an update that found nothing to add or record).
 
     Raises:
         ValueError, FileNotFoundError, UsdInputError, BodyModelError: bad input.
@@ -177,9 +181,10 @@ def project_layers(
         new = [k for k, sim in enumerate(sim_layers) if str(Path(sim)) not in kept.sources]
         if not new:
             kept.metadata["last_run"] = _run_record(0, 0, 0.0, started, 0)
-            if not recorded and kept.flagged is not None:
+            backfilled = not recorded and kept.flagged is not None
+            if backfilled:
                 save_canonical_set(output, kept)
-            return kept
+            return kept, backfilled
         sim_layers = [sim_layers[k] for k in new]
         body_layers = body_layers if len(body_layers) == 1 else [body_layers[k] for k in new]
         splits = [splits[k] for k in new]
@@ -266,7 +271,7 @@ def project_layers(
             data.metadata[key] += float(kept.metadata.get(key, 0.0))
         data = concat_canonical_sets(kept, data)
     save_canonical_set(output, data)
-    return data
+    return data, True
 
 
 def _run_record(
