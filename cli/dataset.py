@@ -324,14 +324,15 @@ def _networks_table(rows: list[NetworkFloor]) -> str:
 
 
 @dataset.command("summary")
-@click.argument("folder", type=click.Path(file_okay=False, path_type=Path))
+@click.argument("folder", type=click.Path(path_type=Path))
 @click.option(
     "--by", type=click.Choice(GROUPINGS), default="split", show_default=True,
     help="Group the sequences per split, per motion kind (each capture alone) or not at all.",
 )  # fmt: skip
 @json_option("Print every group's figures as JSON.")
 def summary(folder: Path, by: str, as_json: bool) -> None:
-    """The simulation checks of the dataset in FOLDER (from its manifest), summed up: inside the
+    """The simulation checks of the dataset in FOLDER (from its manifest, or of the manifest file
+    FOLDER, e.g. one committed in docs/datasets), summed up: inside the
     body forced / elsewhere, distance from the body, stretch (p99 and the largest single edge),
     NaN, retried and bad frames."""
     with user_errors():

@@ -79,6 +79,8 @@ def test_cli_table_json_and_errors(tmp_path: Path, manifest: dict[str, Any]) -> 
     assert lines[1].startswith("walk | 2 / 2 | 400 | 0.050 | 0.040 / 0.600 | 1 / 1 |")
     result = runner.invoke(main, ["dataset", "summary", str(tmp_path), "--json"])
     rows = json.loads(result.output)
+    result = runner.invoke(main, ["dataset", "summary", str(tmp_path / MANIFEST_NAME), "--json"])
+    assert json.loads(result.output) == rows  # the manifest file reads as its folder
     assert [r["group"] for r in rows] == ["train", "test", "all"] and rows[2]["frames"] == 700
     result = runner.invoke(main, ["dataset", "summary", str(tmp_path / "missing")])
     assert result.exit_code != 0 and "no dataset manifest" in result.output
