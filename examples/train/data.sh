@@ -10,9 +10,9 @@
 # only the layers it lacks. Needs the three CMU clips of ../shared/mocap beside the project
 # (MOCAP=DIR to read them elsewhere). On a 2-core machine (stop 41), the dress: 1 h 42 min of
 # simulation (v4 28 min, v4x 17, cmu4 13, v5s 16, v6s 28), then about 12 minutes of projection.
-# The T-shirt's sets were made before the snag check, one at a time: v4 51 min and v4x 34
-# (stop 21; three body shapes a motion, the dress's sets two), cmu4 14 (stop 31), v5s 22 on one
-# worker beside other work (stop 37): about 2 h of simulation.
+# The T-shirt's sets are larger (three body shapes a motion, the dress's two): v4 51 min with the
+# check (stop 42); before it, v4x 34 (stop 21), cmu4 14 (stop 31), v5s 22 on one worker beside
+# other work (stop 37): about 2 h of simulation.
 #
 #   canonical_GARMENT_v4c.npz      v4 + v4x + cmu4: the members' VAEs and pose codes
 #   canonical_tshirt_v4cs.npz      v4c + v5s: the T-shirt's regressors

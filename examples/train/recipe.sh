@@ -65,5 +65,6 @@ for m in 0 1 2; do
         touch "$run/.done"
     done
 done
+# name: the last step's, whose folders hold the members
 usd-garment train combine "$RUNS/${GARMENT}_${name}"_m{0,1,2} --out "$MODEL" \
     --latent-smoothing $SMOOTHING --version "${VERSION:-retrained}"
