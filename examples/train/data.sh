@@ -14,6 +14,10 @@
 # check (stop 42); before it, v4x 34 (stop 21), cmu4 14 (stop 31), v5s 22 on one worker beside
 # other work (stop 37): about 2 h of simulation.
 #
+# Each set can be held to its newest committed manifest (dress: *_stop41, v5s *_stop40; T-shirt:
+# v4 *_stop42, the others made before the snag check): usd-garment dataset compare
+# docs/datasets/GARMENT_NAME_..._manifest.json OUT/dataset_GARMENT_NAME
+#
 #   canonical_GARMENT_v4c.npz      v4 + v4x + cmu4: the members' VAEs and pose codes
 #   canonical_tshirt_v4cs.npz      v4c + v5s: the T-shirt's regressors
 #   canonical_dress_v4css.npz      v4c + v5s + v6s: the dress's regressors
