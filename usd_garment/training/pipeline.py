@@ -188,13 +188,15 @@ def train_stage(
     checkpoint = folder / "checkpoints" / f"{stage}.pt"
     log = _log(folder, stage)
 
+    trained = []  # the epochs this run trains (a resume continues after the checkpoint's)
+
     def report(epoch: int, total: int, row: dict[str, Any]) -> None:
+        trained.append(epoch)
         log(epoch, total, row)
         if progress is not None:
             progress(stage, epoch, total, row)
 
     started = time.perf_counter()
-    earlier = _checkpoint_epochs(checkpoint) if resume else []
     net: torch.nn.Module
     if stage == "pose":
         config: Any = settings.pose
@@ -238,6 +240,7 @@ def train_stage(
             vae_record["tuned_with_regressor"] = asdict(config)
             _save_stage(folder, "vae", vae.cpu(), vae_record)
     net = net.cpu()
+    earlier = history["epochs"][: len(history["epochs"]) - len(trained)]
     record = {
         "stage": stage,
         "config": config.to_dict() if hasattr(config, "to_dict") else asdict(config),
@@ -248,15 +251,6 @@ def train_stage(
     }
     _save_stage(folder, stage, net, record)
     return record
-
-
-def _checkpoint_epochs(checkpoint: Path) -> list[dict[str, Any]]:
-    """The history rows (one an epoch, with its ``seconds``) of the epochs that the stage's
-    ``checkpoint`` holds: those an earlier run trained; none without a checkpoint."""
-    if not checkpoint.is_file():
-        return []
-    state = torch.load(checkpoint, map_location="cpu", weights_only=True)
-    return list(state["history"]["epochs"])
 
 
 def assemble_model(
