@@ -194,8 +194,7 @@ def compare_manifests(before: dict[str, Any], now: dict[str, Any]) -> list[Seque
     rows = []
     for name in [*new, *(n for n in old if n not in new)]:
         a, b = old.get(name), new.get(name)
-        entry = b if b is not None else a
-        assert entry is not None
+        entry = new[name] if name in new else old[name]
         checks_a = (a or {}).get("checks") or {}
         checks_b = (b or {}).get("checks") or {}
         status = (a["status"] if a else "absent", b["status"] if b else "absent")
