@@ -22,6 +22,10 @@
 #   canonical_tshirt_v4cs.npz      v4c + v5s: the T-shirt's regressors
 #   canonical_dress_v4css.npz      v4c + v5s + v6s: the dress's regressors
 set -euo pipefail
+# One compound command, read whole before it runs: editing this file during a run (hours) does
+# not change the run (stop 42's data run broke on an edit of the header: bash reads a script as it
+# goes).
+{
 
 GARMENT=${1:?usage: data.sh tshirt|dress [OUT]}
 OUT=${2:-scratch}
@@ -76,3 +80,5 @@ done
 for name in $NEW_SHAPES; do
     project_onto "$FINAL" "$name"
 done
+exit
+}

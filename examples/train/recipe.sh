@@ -18,6 +18,10 @@
 # model; TRAIN_ARGS is added to every train command (e.g. TRAIN_ARGS="--epochs pose=1 --epochs
 # vae=1 --epochs regressor=1" for a quick try).
 set -euo pipefail
+# One compound command, read whole before it runs: editing this file during a run (hours) does
+# not change the run (stop 42's data run broke on an edit of the header: bash reads a script as it
+# goes).
+{
 
 GARMENT=${1:?usage: recipe.sh tshirt|dress MODEL_DIR [DATA]}
 MODEL=${2:?usage: recipe.sh tshirt|dress MODEL_DIR [DATA]}
@@ -68,3 +72,5 @@ done
 # name: the last step's, whose folders hold the members
 usd-garment train combine "$RUNS/${GARMENT}_${name}"_m{0,1,2} --out "$MODEL" \
     --latent-smoothing $SMOOTHING --version "${VERSION:-retrained}"
+exit
+}
