@@ -21,7 +21,7 @@ from usd_garment.dress import dress
 from usd_garment.methods import get_method
 from usd_garment.usd import garment_layer
 from usd_garment.usd.body_layer import write_body_layer
-from usd_garment.usd.garment_read import read_garment_layer
+from usd_garment.usd.garment_read import read_garment_info, read_garment_layer
 from usd_garment.usd.read import read_smpl_motion
 from usd_garment.usd.stage import canonical_to_world_matrix
 from usd_garment.usd.validate import validate_layer
@@ -74,6 +74,11 @@ def test_round_trip_composes_validates_and_reads_back(
     np.testing.assert_allclose(points, expected, atol=2e-6)
     np.testing.assert_array_equal(faces, template.faces)
     np.testing.assert_array_equal(ginfo.time_codes, motion.time_codes)
+    alone = read_garment_info(out)  # the description without the points
+    assert (alone.mesh, alone.method) == (ginfo.mesh, ginfo.method)
+    for got, read in ((alone.time_codes, ginfo.time_codes), (alone.flagged, ginfo.flagged)):
+        np.testing.assert_array_equal(got, read)
+    np.testing.assert_array_equal(alone.canonical_to_local, ginfo.canonical_to_local)
 
     layer = Sdf.Layer.FindOrOpen(str(out))
     source = Usd.Stage.Open(str(amass_layer))

@@ -27,7 +27,7 @@ from usd_garment.garment.library import load_template
 from usd_garment.garment.model import GarmentModel
 from usd_garment.garment.template import GarmentTemplate
 from usd_garment.motion.sequence import SmplMotion
-from usd_garment.usd.garment_read import read_garment_layer
+from usd_garment.usd.garment_read import read_garment_info, read_garment_layer
 from usd_garment.usd.read import read_smpl_motion
 
 
@@ -291,8 +291,8 @@ def _run_record(
 
 
 def _flags_of_sources(data: CanonicalSet) -> np.ndarray | None:
-    """``(T,)`` bool: the flagged frames of ``data``'s sequences read from their garment layers;
-    None when a layer is gone.
+    """``(T,)`` bool: the flagged frames of ``data``'s sequences read from their garment layers
+    (their records, not their points); None when a layer is gone.
 
     Raises:
         ValueError: a layer has another number of frames than its sequence.
@@ -301,7 +301,7 @@ def _flags_of_sources(data: CanonicalSet) -> np.ndarray | None:
     for s, source in enumerate(data.sources):
         if not Path(source).is_file():
             return None
-        _, _, info = read_garment_layer(source)
+        info = read_garment_info(source)
         frames = data.sequence(s)
         if len(info.flagged) != frames.stop - frames.start:
             raise ValueError(

@@ -61,6 +61,37 @@ def read_garment_layer(
         UsdInputError: not a readable layer, no such garment, no time samples, or a per-frame
             quality record of another length than the samples.
     """
+    _, prim, info = _open_garment(path, garment)  # the stage kept open while the prim is read
+    mesh = UsdGeom.Mesh(prim)
+    attr = mesh.GetPointsAttr()
+    matrix = info.canonical_to_local
+    local = np.stack([np.asarray(attr.Get(t), dtype=np.float64) for t in info.time_codes.tolist()])
+    points = (local - matrix[3, :3]) @ np.linalg.inv(matrix[:3, :3])
+    faces = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(), dtype=np.int64).reshape(-1, 3)
+    if np.linalg.det(matrix[:3, :3]) < 0:
+        faces = faces[:, ::-1].copy()
+    return points, faces, info
+
+
+def read_garment_info(path: str | Path, garment: str | None = None) -> GarmentLayerInfo:
+    """The description of one garment of the layer without its points (which
+    :func:`read_garment_layer` reads too): time codes, method, frame, flagged frames.
+
+    Raises:
+        UsdInputError: as :func:`read_garment_layer`.
+    """
+    return _open_garment(path, garment)[2]
+
+
+def _open_garment(
+    path: str | Path, garment: str | None
+) -> tuple[Usd.Stage, Usd.Prim, GarmentLayerInfo]:
+    """The opened stage, the garment mesh prim in it (valid while the stage is) and its
+    description (see :func:`read_garment_layer`).
+
+    Raises:
+        UsdInputError: as :func:`read_garment_layer`.
+    """
     path = Path(path)
     if not path.is_file():
         raise UsdInputError(f"{path}: no such file")
@@ -77,24 +108,17 @@ def read_garment_layer(
         names = ", ".join(m.GetName() for m in garment_meshes(stage)) or "none"
         raise UsdInputError(f"{path}: name one garment mesh (found: {names})")
     prim = meshes[0]
-    mesh = UsdGeom.Mesh(prim)
     matrix = np.array(prim.GetCustomData()[CANONICAL_TO_LOCAL_KEY], dtype=np.float64)
-    attr = mesh.GetPointsAttr()
-    times = np.array(attr.GetTimeSamples(), dtype=np.float64)
+    times = np.array(UsdGeom.Mesh(prim).GetPointsAttr().GetTimeSamples(), dtype=np.float64)
     if times.size == 0:
         raise UsdInputError(f"{path}: {prim.GetPath()} has no time-sampled points")
-    local = np.stack([np.asarray(attr.Get(t), dtype=np.float64) for t in times.tolist()])
-    points = (local - matrix[3, :3]) @ np.linalg.inv(matrix[:3, :3])
-    faces = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(), dtype=np.int64).reshape(-1, 3)
-    if np.linalg.det(matrix[:3, :3]) < 0:
-        faces = faces[:, ::-1].copy()
     method_attr = prim.GetAttribute("garment:method")
     method = str(method_attr.Get()) if method_attr and method_attr.HasAuthoredValue() else ""
     info = GarmentLayerInfo(
         path, str(prim.GetPath()), times, stage.GetTimeCodesPerSecond(), method, matrix,
         _flagged_frames(prim, len(times), path),
     )  # fmt: skip
-    return points, faces, info
+    return stage, prim, info
 
 
 def _flagged_frames(prim: Usd.Prim, frames: int, path: Path) -> np.ndarray:
