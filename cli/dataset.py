@@ -370,7 +370,8 @@ def _summary_table(rows: list[GroupQuality]) -> str:
 def compare(before: Path, now: Path, as_json: bool) -> None:
     """A dataset made again (NOW: its folder or manifest) against the manifest it had (BEFORE,
     e.g. one committed in docs/datasets), sequence by sequence: the same simulation gives the
-    same checks (all but its time). The last line counts the sequences that came out the same."""
+    same checks (all but its time). A changed sequence shows how far apart its figures are (the
+    largest relative change). The last line counts the sequences that came out the same."""
     with user_errors():
         rows = compare_manifests(read_manifest(before), read_manifest(now))
     if as_json:
@@ -395,7 +396,9 @@ def _compare_table(rows: list[SequenceChange]) -> str:
     lines = ["sequence | kind | status | retried / bad frames, stretch p99 max (largest edge): "
              "before | now | verdict"]  # fmt: skip
     for r in rows:
-        verdict = "same" if r.same else "changed: " + ", ".join(r.changed)
+        largest = r.largest_relative_change
+        by = "" if largest is None else f" (by {largest:.1e} relative at most)"
+        verdict = "same" if r.same else f"changed{by}: " + ", ".join(r.changed)
         lines.append(
             f"{r.name} | {r.kind} | {' → '.join(r.status)} | {figures(r.before)} | "
             f"{figures(r.now)} | {verdict}"

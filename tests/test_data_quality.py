@@ -91,6 +91,7 @@ def test_compare_finds_the_sequences_that_changed(manifest: dict[str, Any]) -> N
     again = json.loads(json.dumps(manifest))
     walk, walk1, run, capture = again["sequences"]
     walk["checks"]["retries"] = {"12": 1}  # one frame fewer retried
+    walk["checks"]["inside_forced_share_mean"] = 2.5e-3
     walk1["seconds"] = 99.0  # time is not a figure of the simulation
     run.update(status="ok", checks=dict(capture["checks"]))  # the bad run now finishes
     del capture["checks"]["stretch_max"]  # a check one manifest lacks is not compared
@@ -98,9 +99,11 @@ def test_compare_finds_the_sequences_that_changed(manifest: dict[str, Any]) -> N
     again["sequences"] = [capture, walk, walk1, run]  # order: the new manifest's
     rows = compare_manifests(manifest, again)
     assert [(r.name, r.kind, r.changed) for r in rows] == [
-        ("c00_s0", "cmu_131_03", ()), ("m00_s0", "walk", ("retries",)),
+        ("c00_s0", "cmu_131_03", ()), ("m00_s0", "walk", ("inside_forced_share_mean", "retries")),
         ("m00_s1", "walk", ()), ("m01_s0", "run", ("status",)),
     ]  # fmt: skip
+    assert rows[1].largest_relative_change == pytest.approx(0.2)  # 2e-3 → 2.5e-3; retries no number
+    assert rows[3].largest_relative_change is None and rows[0].largest_relative_change is None
     assert rows[3].status == ("bad", "ok") and rows[3].before == {} and not rows[3].same
     only_before = compare_manifests(manifest, {**again, "sequences": [walk]})
     assert [(r.name, r.status) for r in only_before][-1] == ("c00_s0", ("ok", "absent"))
@@ -122,6 +125,8 @@ def test_compare_cli_reads_a_committed_manifest_and_a_folder(tmp_path: Path) -> 
     assert lines[-1] == "20 of 23 sequences came out the same"
     changed = [line.split(" | ")[0] for line in lines[1:-1] if "changed" in line]
     assert changed == ["m08_s0", "m08_s1", "c00_s0"]
+    capture = next(line for line in lines if line.startswith("c00_s0"))
+    assert "| changed (by 5.7e-03 relative at most): retries, inside_share_mean," in capture
     manifest = json.loads((remade / MANIFEST_NAME).read_text())
     manifest["sequences"][0]["status"] = "pending"  # not simulated yet
     (remade / MANIFEST_NAME).write_text(json.dumps(manifest))

@@ -177,9 +177,29 @@ class SequenceChange:
         """Whether the sequence came out with the figures it had."""
         return not self.changed
 
+    @property
+    def largest_relative_change(self) -> float | None:
+        """The largest ``|now - before| / max(|before|, |now|)`` over the changed checks that are
+        numbers, to tell a few vertices from a changed simulation; None when no changed check is a
+        number (only the status or the retried frames)."""
+        ratios = [
+            abs(b - a) / max(abs(a), abs(b))
+            for a, b in ((self.before[k], self.now[k]) for k in self.changed if k != "status")
+            if _is_number(a) and _is_number(b)
+        ]
+        return max(ratios, default=None)
+
     def to_json(self) -> dict[str, Any]:
         """The comparison as plain JSON values."""
-        return {**asdict(self), "same": self.same}
+        return {
+            **asdict(self), "same": self.same,
+            "largest_relative_change": self.largest_relative_change,
+        }  # fmt: skip
+
+
+def _is_number(value: Any) -> bool:
+    """Whether a check's value is a number (not a bool, a list or a per-frame record)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
 def compare_manifests(before: dict[str, Any], now: dict[str, Any]) -> list[SequenceChange]:
