@@ -75,10 +75,6 @@ class PoseCodec(torch.nn.Module):
         """Pose features ``(B, 207)`` (R − I of joints 1..23) of codes ``(B, code_size)``."""
         return self.decoder(code)
 
-    def decode_rotations(self, code: torch.Tensor) -> torch.Tensor:
-        """Rotation matrices ``(B, 23, 3, 3)`` of joints 1..23 of codes ``(B, code_size)``."""
-        return features_to_rotations(self.decode(code))
-
     def forward(self, pose: torch.Tensor) -> torch.Tensor:
         """Reconstructed pose features ``(B, 207)`` of poses ``(B, 24, 3)``."""
         return self.decode(self.encode(pose))
