@@ -10,12 +10,12 @@
 # only the layers it lacks. Needs the three CMU clips of ../shared/mocap beside the project
 # (MOCAP=DIR to read them elsewhere). On a 2-core machine (stop 41), the dress: 1 h 42 min of
 # simulation (v4 28 min, v4x 17, cmu4 13, v5s 16, v6s 28), then about 12 minutes of projection.
-# The T-shirt's sets are larger (three body shapes a motion, the dress's two): v4 51 min and v4x
-# 34 with the check (stop 42); before it, cmu4 14 (stop 31), v5s 22 on one worker beside other
-# work (stop 37): about 2 h of simulation.
+# The T-shirt's sets are larger (three body shapes a motion, the dress's two): v4 51 min, v4x 34
+# (stop 42), cmu4 16 and v5s 18 (stop 43): about 2 h of simulation, then 12 minutes of
+# projection.
 #
 # Each set can be held to its newest committed manifest (dress: *_stop41, v5s *_stop40; T-shirt:
-# v4 and v4x *_stop42, the others made before the snag check): usd-garment dataset compare
+# v4 and v4x *_stop42, cmu4 and v5s *_stop43): usd-garment dataset compare
 # docs/datasets/GARMENT_NAME_..._manifest.json OUT/dataset_GARMENT_NAME
 #
 #   canonical_GARMENT_v4c.npz      v4 + v4x + cmu4: the members' VAEs and pose codes
