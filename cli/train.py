@@ -43,6 +43,13 @@ def _train_options(command: F) -> F:
                      help="The paper's VAE ablations (default: none, the full model)."),
         click.option("--epochs", "epochs", multiple=True, metavar="STAGE=N",
                      help="Epochs of a stage, e.g. --epochs vae=200 (repeatable)."),
+        click.option("--seed", type=click.IntRange(min=0), default=None,
+                     help="Seed of every stage (initial weights, noise, crops), over the "
+                     "settings' (e.g. another training of a member's recipe)."),
+        click.option("--init-from", "init_from", type=click.Path(file_okay=False,
+                     path_type=Path), default=None, help="Run folder whose trained regressor "
+                     "starts the regressor's training (a fine-tuning), over the settings' "
+                     "init_from."),
         click.option("--planes", "planes_path", type=click.Path(dir_okay=False, path_type=Path),
                      default=None, help="Posed collision planes of --data for a regressor with "
                      "lambda_posed > 0 (.npz): read when made for this set, else computed and "
@@ -57,8 +64,15 @@ def train() -> None:
     """Train the learned garment method: pose codec, garment VAE, regressor."""
 
 
-def _settings(out: Path, config_path: Path | None, ablation: str | None, epochs: tuple[str, ...],
-              device: str) -> Any:  # fmt: skip
+def _settings(
+    out: Path,
+    config_path: Path | None,
+    ablation: str | None,
+    epochs: tuple[str, ...],
+    device: str,
+    seed: int | None = None,
+    init_from: Path | None = None,
+) -> Any:
     from usd_garment.training.pipeline import STAGES, TrainSettings
 
     source = config_path or (out / "config.json")
@@ -72,6 +86,11 @@ def _settings(out: Path, config_path: Path | None, ablation: str | None, epochs:
         if stage not in STAGES or not count.isdigit():
             raise click.BadParameter(f"expected STAGE=N with STAGE in {STAGES}, got {text!r}")
         values.setdefault(stage, {})["epochs"] = int(count)
+    if seed is not None:
+        for stage in STAGES:
+            values.setdefault(stage, {})["seed"] = seed
+    if init_from is not None:
+        values.setdefault("regressor", {})["init_from"] = str(init_from)
     settings = TrainSettings.from_dict(values)
     settings.set_device(device)
     return settings
@@ -86,6 +105,8 @@ def _command_line(
     ablation: str | None,
     epochs: tuple[str, ...],
     planes_path: Path | None,
+    seed: int | None = None,
+    init_from: Path | None = None,
 ) -> str:
     """The ``usd-garment train`` command that trains the same model (recorded in it)."""
     words = ["train", "all" if len(stages) > 1 else stages[0], "--data", str(data)]
@@ -96,6 +117,10 @@ def _command_line(
         words += ["--ablation", ablation]
     for text in epochs:
         words += ["--epochs", text]
+    if seed is not None:
+        words += ["--seed", str(seed)]
+    if init_from is not None:
+        words += ["--init-from", str(init_from)]
     if planes_path is not None:
         words += ["--planes", str(planes_path)]
     return "usd-garment " + shlex.join(words)
@@ -123,6 +148,8 @@ def _run(
     ablation: str | None,
     epochs: tuple[str, ...],
     planes_path: Path | None = None,
+    seed: int | None = None,
+    init_from: Path | None = None,
 ) -> None:
     with user_errors():
         from usd_garment.body.io import load_body_model
@@ -137,7 +164,7 @@ def _run(
         )
         from usd_garment.training.plots import plot_curves
 
-        settings = _settings(out, config_path, ablation, epochs, device)
+        settings = _settings(out, config_path, ablation, epochs, device, seed, init_from)
         canonical = load_canonical_set(data)
         body = load_body_model(None)
         fields = load_body_fields()
@@ -178,7 +205,16 @@ def _run(
         click.echo(f"wrote {out / CURVES_NAME}, log {out / LOG_NAME}")
         if len(records) == len(STAGES):
             command = _command_line(
-                stages, data, out, device, config_path, ablation, epochs, planes_path
+                stages,
+                data,
+                out,
+                device,
+                config_path,
+                ablation,
+                epochs,
+                planes_path,
+                seed,
+                init_from,
             )
             if len(stages) < len(STAGES):
                 command = _after_earlier(out / CONFIG_NAME, command, trained > 0)
@@ -220,9 +256,10 @@ def _stage_command(name: str, stages: tuple[str, ...], help_text: str) -> None:
     @train.command(name, help=help_text)
     @_train_options
     def command(data: Path, out: Path, device: str, resume: bool, config_path: Path | None,
-                ablation: str | None, epochs: tuple[str, ...],
-                planes_path: Path | None) -> None:  # fmt: skip
-        _run(stages, data, out, device, resume, config_path, ablation, epochs, planes_path)
+                ablation: str | None, epochs: tuple[str, ...], seed: int | None,
+                init_from: Path | None, planes_path: Path | None) -> None:  # fmt: skip
+        _run(stages, data, out, device, resume, config_path, ablation, epochs, planes_path,
+             seed, init_from)  # fmt: skip
 
 
 _stage_command("pose", ("pose",), "Train the 10-d pose code (an autoencoder of the pose).")

@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import re
 import shutil
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -134,19 +135,21 @@ def test_train_then_dress(body_model: BodyModel, synthetic_body: BodyModel, tmp_
     # decoder moving too (its VAE stage is written again)
     tuned = tmp_path / "tuned"
     shutil.copytree(model, tuned)
-    regressor = {**TINY["regressor"], "epochs": 1, "init_from": str(model), "lambda_posed": 1.0,
-                 "tune_decoder": True}  # fmt: skip
+    regressor = {**TINY["regressor"], "epochs": 1, "lambda_posed": 1.0, "tune_decoder": True}
     config.write_text(json.dumps({**TINY, "regressor": regressor}))
     planes = tmp_path / "planes.npz"
     code, output = _run(["train", "regressor", "--data", data, "--out", tuned, "--config", config,
-                         "--planes", planes])  # fmt: skip
+                         "--seed", 4, "--init-from", model, "--planes", planes])  # fmt: skip
     assert code == 0, output
     assert planes.is_file()
-    # the record names every command that made the folder's networks, the planes included
+    # the record names every command that made the folder's networks, the options included
     command = json.loads((tuned / "model.json").read_text())["command"]
     first = json.loads((model / "model.json").read_text())["command"]
     assert command.startswith(f"{first}; then usd-garment train regressor --data {data}")
-    assert command.endswith(f"--out {tuned} --device cpu --config {config} --planes {planes}")
+    assert command.endswith(f"--out {tuned} --device cpu --config {config} --seed 4 "
+                            f"--init-from {model} --planes {planes}")  # fmt: skip
+    settings = json.loads((tuned / "config.json").read_text())
+    assert [settings[stage]["seed"] for stage in ("pose", "vae", "regressor")] == [4, 4, 4]
     row = json.loads((tuned / "regressor.json").read_text())["history"]["epochs"][-1]
     assert row["train_posed"] >= 0 and row["train_vertex_mm"] > 0 and "val_posed_inside_pct" in row
     vae_record = json.loads((tuned / "vae.json").read_text())
@@ -380,10 +383,14 @@ def test_the_recipe_script_trains_the_shipped_members_steps(garment: str, tmp_pa
             if "--config" in step:
                 config = step[step.index("--config") + 1]
                 step_settings = settings(config).regressor
-                # a fine-tuning starts from the step before; the others train from nothing
-                expected = before if step_settings.lambda_posed > 0 else None
-                assert step_settings.init_from == expected, (config, before)
-                assert step_settings.seed == m
+                # a fine-tuning starts from the step before (the settings name it too, for
+                # scratch/runs); the others train from nothing
+                fine_tuning = step_settings.lambda_posed > 0
+                assert step_settings.init_from == (before if fine_tuning else None), config
+                assert ("--init-from" in step) == fine_tuning
+                if fine_tuning:
+                    assert step[step.index("--init-from") + 1] == before
+                assert step_settings.seed == m and "--seed" not in step
             before = out
         last_steps.append(before)
         assert f"--config {config}" in member.info["command"]
@@ -391,6 +398,27 @@ def test_the_recipe_script_trains_the_shipped_members_steps(garment: str, tmp_pa
     assert combine[:2] == ["train", "combine"] and combine[2:5] == last_steps
     smoothing = float(combine[combine.index("--latent-smoothing") + 1])
     assert smoothing == model.latent_smoothing
+
+
+def test_the_recipe_script_trains_again_with_other_seeds(tmp_path: Path) -> None:
+    """``SEEDS="3 4 5" RUNS=FOLDER recipe.sh``: every command of member m gets ``--seed``
+    3 + m, the run folders are in FOLDER, and each fine-tuning starts from the folder of the
+    step before there (not the one its settings name); SEEDS with another count is refused."""
+    env = {"SEEDS": "3 4 5", "RUNS": "scratch/again"}
+    calls = script_calls("recipe.sh", "dress", "MODEL", tmp_path=tmp_path, env=env)
+    trains = [c for c in calls if c[1] in ("all", "regressor")]
+    assert len(trains) == 9
+    for k, call in enumerate(trains):
+        m = k // 3
+        assert call[call.index("--seed") + 1] == str(3 + m)
+        assert call[call.index("--out") + 1].startswith("scratch/again/dress_")
+        if "--init-from" in call:
+            before = trains[k - 1]
+            assert call[call.index("--init-from") + 1] == before[before.index("--out") + 1]
+    assert sum("--init-from" in c for c in trains) == 3
+    (tmp_path / "two").mkdir()
+    with pytest.raises(subprocess.CalledProcessError):
+        script_calls("recipe.sh", "dress", "M", tmp_path=tmp_path / "two", env={"SEEDS": "3 4"})
 
 
 def test_final_quality_pushes_the_learned_garment_out(body_model: BodyModel,
