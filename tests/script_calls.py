@@ -25,17 +25,20 @@ if args[0] == "project":
 """
 
 
-def script_calls(script: str, *args: str, tmp_path: Path) -> list[list[str]]:
+def script_calls(
+    script: str, *args: str, tmp_path: Path, env: dict[str, str] | None = None
+) -> list[list[str]]:
     """Run ``bash examples/train/SCRIPT ARGS...`` in ``tmp_path / "work"``, which links to the
     repository's ``examples`` folder (so that the script's relative ``scratch/`` paths land in
-    ``tmp_path``), against the stand-in; return the arguments of each ``usd-garment`` call, in
-    order."""
+    ``tmp_path``), against the stand-in, with ``env`` added to the environment; return the
+    arguments of each ``usd-garment`` call, in order."""
     log = tmp_path / "calls.jsonl"
     stand_in = tmp_path / "bin" / "usd-garment"
     stand_in.parent.mkdir()
     stand_in.write_text(f"#!{sys.executable}\n" + STAND_IN.format(log=str(log)))
     stand_in.chmod(0o755)
-    env = {**os.environ, "PATH": f"{stand_in.parent}{os.pathsep}{os.environ['PATH']}"}
+    env = {**os.environ, **(env or {}),
+           "PATH": f"{stand_in.parent}{os.pathsep}{os.environ['PATH']}"}  # fmt: skip
     work = tmp_path / "work"
     work.mkdir()
     (work / "examples").symlink_to(ROOT / "examples", target_is_directory=True)

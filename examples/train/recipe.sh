@@ -12,11 +12,14 @@
 #                                → tshirt_J (λ 1.5, 60 epochs); no latent smoothing
 #   dress (version 9, stop 39):  dress_D30 → dress_L0 on v4css → dress_L (λ 7.7, 30 epochs);
 #                                0.1 s latent smoothing
-# The run folders go to scratch/runs/GARMENT_STEP_m{0,1,2} (the settings' init_from name them);
-# a step whose run folder holds its result is skipped, so an interrupted run goes on where it
-# stopped. Run it from the repository root. DEVICE=cuda trains on a GPU; VERSION names the joined
+# The run folders go to RUNS/GARMENT_STEP_m{0,1,2} (RUNS: scratch/runs, which the settings'
+# init_from name); a step whose run folder holds its result is skipped, so an interrupted run goes
+# on where it stopped. Run it from the repository root. DEVICE=cuda trains on a GPU; VERSION names the joined
 # model; TRAIN_ARGS is added to every train command (e.g. TRAIN_ARGS="--epochs pose=1 --epochs
-# vae=1 --epochs regressor=1" for a quick try).
+# vae=1 --epochs regressor=1" for a quick try). Another training of the same recipe, to tell data
+# from chance: SEEDS="3 4 5" (the three members' seeds, over the settings' 0 1 2) and RUNS=FOLDER
+# (the run folders' parent, scratch/runs by default). Each fine-tuning step starts from the run
+# folder of the step before (--init-from), wherever RUNS puts it.
 set -euo pipefail
 # One compound command, read whole before it runs: editing this file during a run (hours) does
 # not change the run (stop 42's data run broke on an edit of the header: bash reads a script as it
@@ -27,7 +30,7 @@ GARMENT=${1:?usage: recipe.sh tshirt|dress MODEL_DIR [DATA]}
 MODEL=${2:?usage: recipe.sh tshirt|dress MODEL_DIR [DATA]}
 DATA=${3:-scratch}
 # STEPS: the regressor's steps after the first, NAME:SETTINGS:PLANES (SETTINGS empty: the run
-# folder's own; PLANES: with the posed planes)
+# folder's own; PLANES: a fine-tuning of the step before, with the posed planes)
 case $GARMENT in
     tshirt) FIRST=tshirt_member START=T30 SET=v4cs SMOOTHING=0.0
         STEPS="J0:tshirt_member: J1:tshirt_v6_step1_member:planes J:tshirt_v6_member:planes" ;;
@@ -37,7 +40,10 @@ case $GARMENT in
 esac
 DEVICE=${DEVICE:-cpu}
 read -r -a EXTRA <<<"${TRAIN_ARGS:-}"
-RUNS=scratch/runs
+read -r -a SEED_OF <<<"${SEEDS:-}"
+[ ${#SEED_OF[@]} -eq 0 ] || [ ${#SEED_OF[@]} -eq 3 ] || {
+    echo "recipe.sh: SEEDS names the three members' seeds, not '$SEEDS'" >&2; exit 2; }
+RUNS=${RUNS:-scratch/runs}
 HERE=$(dirname "$0")
 PLANES=$DATA/planes_canonical_${GARMENT}_$SET.npz
 mkdir -p "$RUNS"
@@ -50,10 +56,12 @@ again() {
 }
 
 for m in 0 1 2; do
+    seed=()
+    [ ${#SEED_OF[@]} -eq 0 ] || seed=(--seed "${SEED_OF[$m]}")
     run=$RUNS/${GARMENT}_${START}_m$m
     if [ ! -f "$run/model.json" ]; then  # written once all three stages are
         usd-garment train all --data "$DATA/canonical_${GARMENT}_v4c.npz" --out "$run" \
-            --device "$DEVICE" --config "$HERE/$FIRST$m.json" --resume "${EXTRA[@]}"
+            --device "$DEVICE" --config "$HERE/$FIRST$m.json" --resume "${seed[@]}" "${EXTRA[@]}"
     fi
     for step in $STEPS; do
         IFS=: read -r name settings planes <<<"$step"
@@ -63,9 +71,9 @@ for m in 0 1 2; do
         again "$from" "$run"
         args=()
         [ -n "$settings" ] && args+=(--config "$HERE/$settings$m.json")
-        [ -n "$planes" ] && args+=(--planes "$PLANES")
+        [ -n "$planes" ] && args+=(--init-from "$from" --planes "$PLANES")  # a fine-tuning
         usd-garment train regressor --data "$DATA/canonical_${GARMENT}_$SET.npz" --out "$run" \
-            --device "$DEVICE" "${args[@]}" "${EXTRA[@]}"
+            --device "$DEVICE" "${args[@]}" "${seed[@]}" "${EXTRA[@]}"
         touch "$run/.done"
     done
 done
