@@ -44,8 +44,9 @@ def _train_options(command: F) -> F:
         click.option("--epochs", "epochs", multiple=True, metavar="STAGE=N",
                      help="Epochs of a stage, e.g. --epochs vae=200 (repeatable)."),
         click.option("--seed", type=click.IntRange(min=0), default=None,
-                     help="Seed of every stage (initial weights, noise, crops), over the "
-                     "settings' (e.g. another training of a member's recipe)."),
+                     help="Every stage's seed (initial weights, noise, crops), over the "
+                     "settings'; give it to each command of another training of a member's "
+                     "recipe, as the settings it records are every stage's."),
         click.option("--init-from", "init_from", type=click.Path(file_okay=False,
                      path_type=Path), default=None, help="Run folder whose trained regressor "
                      "starts the regressor's training (a fine-tuning), over the settings' "
@@ -73,6 +74,8 @@ def _settings(
     seed: int | None = None,
     init_from: Path | None = None,
 ) -> Any:
+    """The settings of a run: the settings file's (or the run folder's), then the options over
+    them (``seed``: every stage's)."""
     from usd_garment.training.pipeline import STAGES, TrainSettings
 
     source = config_path or (out / "config.json")
@@ -204,18 +207,8 @@ def _run(
         plot_curves(records, out / CURVES_NAME)
         click.echo(f"wrote {out / CURVES_NAME}, log {out / LOG_NAME}")
         if len(records) == len(STAGES):
-            command = _command_line(
-                stages,
-                data,
-                out,
-                device,
-                config_path,
-                ablation,
-                epochs,
-                planes_path,
-                seed,
-                init_from,
-            )
+            command = _command_line(stages, data, out, device, config_path, ablation, epochs,
+                                    planes_path, seed, init_from)  # fmt: skip
             if len(stages) < len(STAGES):
                 command = _after_earlier(out / CONFIG_NAME, command, trained > 0)
             assemble_model(out, canonical, body, settings, {"command": command})
