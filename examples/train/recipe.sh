@@ -16,10 +16,10 @@
 # init_from name); a step whose run folder holds its result is skipped, so an interrupted run
 # goes on where it stopped. Run it from the repository root. DEVICE=cuda trains on a GPU; VERSION
 # names the joined model; TRAIN_ARGS is added to every train command (e.g. TRAIN_ARGS="--epochs
-# pose=1 --epochs vae=1 --epochs regressor=1" for a quick try). Another training of the same recipe, to tell data
-# from chance: SEEDS="3 4 5" (the three members' seeds, over the settings' 0 1 2) and RUNS=FOLDER
-# (the run folders' parent, scratch/runs by default). Each fine-tuning step starts from the run
-# folder of the step before (--init-from), wherever RUNS puts it.
+# pose=1 --epochs vae=1 --epochs regressor=1" for a quick try). Another training of the same
+# recipe, to tell data from chance: SEEDS="3 4 5" (the three members' seeds, over the settings'
+# 0 1 2) and RUNS=FOLDER (the run folders' parent, scratch/runs by default). Each fine-tuning step
+# starts from the run folder of the step before (--init-from), wherever RUNS puts it.
 set -euo pipefail
 # One compound command, read whole before it runs (see data.sh).
 {
