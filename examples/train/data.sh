@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The training data of a shipped model (the T-shirt's version 6, the dress's version 9), made
+# The training data of a shipped model (the T-shirt's version 7, the dress's version 9), made
 # from nothing with the current simulator: the four extra CMU captures imported, the simulated
 # sets, and the canonical sets its training reads (docs/learning.md, "The dress's data in one
 # command").

@@ -8,7 +8,7 @@
 # garment's step-1 settings with 30-frame crops), then its regressor trained again from nothing
 # on the larger set, then fine-tuned end to end with the posed collision term and the decoder
 # tuned; the members joined.
-#   tshirt (version 6, stop 38): tshirt_T30 → tshirt_J0 on v4cs → tshirt_J1 (λ 0.45, 30 epochs)
+#   tshirt (version 7, stop 44): tshirt_T30 → tshirt_J0 on v4cs → tshirt_J1 (λ 0.45, 30 epochs)
 #                                → tshirt_J (λ 1.5, 60 epochs); no latent smoothing
 #   dress (version 9, stop 39):  dress_D30 → dress_L0 on v4css → dress_L (λ 7.7, 30 epochs);
 #                                0.1 s latent smoothing
