@@ -90,3 +90,20 @@ def skin(points: torch.Tensor, weights: torch.Tensor, transforms: torch.Tensor) 
     else:
         blended = torch.einsum("bnj,bjcd->bncd", weights, transforms[..., :3, :])
     return torch.einsum("bncd,bnd->bnc", blended[..., :3], points) + blended[..., 3]
+
+
+def inverse_skin(
+    points: torch.Tensor, weights: torch.Tensor, transforms: torch.Tensor
+) -> torch.Tensor:
+    """Rest-pose points ``(B, N, 3)`` that ``skin(·, weights, transforms)`` maps to ``points``.
+
+    Args:
+        points: ``(B, N, 3)`` posed points (m).
+        weights: ``(N, J)`` or ``(B, N, J)`` skinning weights, rows summing to 1.
+        transforms: ``(B, J, 4, 4)`` skinning transforms.
+    """
+    if weights.dim() == 2:
+        weights = weights.expand(points.shape[0], -1, -1)
+    blended = torch.einsum("bnj,bjcd->bncd", weights, transforms[..., :3, :])  # (B, N, 3, 4)
+    offset = (points - blended[..., 3])[..., None]
+    return torch.linalg.solve(blended[..., :3], offset)[..., 0]

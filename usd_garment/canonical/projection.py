@@ -46,8 +46,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from usd_garment.body.lbs import inverse_skin
 from usd_garment.canonical.strain import TriangleStrain
-from usd_garment.canonical.unpose import inverse_skin
 from usd_garment.garment.model import Articulation, GarmentModel
 
 #: Called with the number of frames finished so far.

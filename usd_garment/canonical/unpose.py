@@ -15,30 +15,13 @@ import numpy as np
 import torch
 from scipy.spatial import cKDTree
 
-from usd_garment.body.lbs import batch_rodrigues, pose_features, skin
+from usd_garment.body.lbs import batch_rodrigues, inverse_skin, pose_features, skin
 from usd_garment.body.model import BodyModel
 from usd_garment.garment.template import GarmentTemplate
 from usd_garment.methods.lbs import nearest_body_vertex
 
 #: Frames unposed at once (bounds memory: the body pass holds ~V·12 floats per frame).
 FRAMES_PER_CHUNK = 64
-
-
-def inverse_skin(
-    points: torch.Tensor, weights: torch.Tensor, transforms: torch.Tensor
-) -> torch.Tensor:
-    """Rest-pose points ``(B, N, 3)`` that ``skin(·, weights, transforms)`` maps to ``points``.
-
-    Args:
-        points: ``(B, N, 3)`` posed points (m).
-        weights: ``(N, J)`` or ``(B, N, J)`` skinning weights, rows summing to 1.
-        transforms: ``(B, J, 4, 4)`` skinning transforms.
-    """
-    if weights.dim() == 2:
-        weights = weights.expand(points.shape[0], -1, -1)
-    blended = torch.einsum("bnj,bjcd->bncd", weights, transforms[..., :3, :])  # (B, N, 3, 4)
-    offset = (points - blended[..., 3])[..., None]
-    return torch.linalg.solve(blended[..., :3], offset)[..., 0]
 
 
 def _body_offsets(
