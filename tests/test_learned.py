@@ -469,7 +469,12 @@ def test_learned_method_times_its_stages(body_model: BodyModel, synthetic_body: 
                                          tmp_path: Path) -> None:  # fmt: skip
     """The per-stage seconds that ``benchmarks/bench_dress.py`` reports in ms per frame."""
     from usd_garment.dress import dress
-    from usd_garment.methods.learned import STAGES, LearnedCanonicalMethod, LearnedMethod
+    from usd_garment.methods.learned import (
+        STAGES,
+        LearnedCanonicalMethod,
+        LearnedMethod,
+        LearnedPreimageMethod,
+    )
 
     if body_model is synthetic_body:
         pytest.skip("needs the embedded default body and its fields")
@@ -484,3 +489,9 @@ def test_learned_method_times_its_stages(body_model: BodyModel, synthetic_body: 
     dress(body, tmp_path / "c.usdc", method=canonical, lod="low")
     ran = {k for k, v in canonical.seconds.items() if v > 0}
     assert ran == {"load", "regressor", "decoder", "canonical", "fields", "posing", "carry"}
+    preimage = LearnedPreimageMethod()
+    dress(body, tmp_path / "p.usdc", method=preimage, lod="low")
+    ran = {k for k, v in preimage.seconds.items() if v > 0}
+    assert ran == {
+        "load", "regressor", "decoder", "canonical", "fields", "posing", "preimage", "carry",
+    }  # fmt: skip

@@ -52,10 +52,18 @@ def push_out_canonical(
         if not bool(near.any()):
             break
         candidates = candidates[near]
-        with torch.enable_grad():
-            p = flat[candidates].requires_grad_(True)
-            d = sdf(p)
-            (grad,) = torch.autograd.grad(d.sum(), p)
-        normal = grad / grad.norm(dim=-1, keepdim=True).clamp_min(1e-12)
-        flat[candidates] += (epsilon - d.detach()).unsqueeze(-1) * normal
+        d, normal = sdf_and_normal(sdf, flat[candidates])
+        flat[candidates] += (epsilon - d).unsqueeze(-1) * normal
     return out
+
+
+def sdf_and_normal(
+    sdf: Callable[[torch.Tensor], torch.Tensor], points: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Signed distances ``(M,)`` (m) of points ``(M, 3)`` and the unit gradients ``(M, 3)`` of
+    ``sdf`` there (the outward normal of the body's level set)."""
+    with torch.enable_grad():
+        p = points.detach().requires_grad_(True)
+        d = sdf(p)
+        (grad,) = torch.autograd.grad(d.sum(), p)
+    return d.detach(), grad / grad.norm(dim=-1, keepdim=True).clamp_min(1e-12)

@@ -23,6 +23,7 @@ import torch
 from scipy.ndimage import gaussian_filter1d
 
 from usd_garment.body.model import BodyModel
+from usd_garment.canonical.preimage_push import PartBoxes, preimage_push
 from usd_garment.canonical.push_out import push_out_canonical
 from usd_garment.eval.body_distance import BodySurface, body_pool
 from usd_garment.eval.push_out import PUSH_OUT_EPS, PUSH_OUT_PASSES, push_out
@@ -47,7 +48,10 @@ FRAMES_PER_CHUNK = 256
 #: Frames posed at once within a chunk (bounds memory: ~N·(3 + 24 + 30) floats per frame).
 POSE_FRAMES = 64
 #: The stages :attr:`LearnedMethod.seconds` times.
-STAGES = ("load", "regressor", "decoder", "canonical", "fields", "posing", "carry", "push_out")
+STAGES = (
+    "load", "regressor", "decoder", "canonical", "fields", "posing", "preimage", "carry",
+    "push_out",
+)  # fmt: skip
 
 
 def shipped_model(garment: str, lod: str | None = None) -> Path | None:
@@ -90,6 +94,8 @@ def learned_method(name: str, model: str | Path | None = None) -> LearnedMethod:
         return LearnedPushOutMethod(model)
     if name == LearnedCanonicalMethod.name:
         return LearnedCanonicalMethod(model)
+    if name == LearnedPreimageMethod.name:
+        return LearnedPreimageMethod(model)
     raise ValueError(f"'{name}' is not a learned method ({', '.join(LEARNED_METHODS)})")
 
 
@@ -148,6 +154,9 @@ class LearnedMethod:
     #: Push the decoded canonical garment ε out of the canonical body before posing
     #: (:func:`push_out_canonical`).
     canonical_push = False
+    #: Push posed vertices out of the parts that posing carries them into, found through the
+    #: body's skinning preimages (:func:`preimage_push`).
+    preimage = False
     #: Push vertices inside or within ε of the posed body out (:func:`push_out`).
     push_out = False
     #: Processes that push the garment out (one CPU core each; 1: this process).
@@ -165,8 +174,8 @@ class LearnedMethod:
         self._fields = fields
         #: Seconds spent by the last :meth:`predict_stream` in each stage (the model's and the
         #: fields' loading, the pose code and GRU, the decoder, the canonical push-out, the
-        #: fields' linearization, the
-        #: posing, the carry to a coarser mesh and the push-out).
+        #: fields' linearization, the posing, the preimage push-out, the carry to a coarser mesh
+        #: and the push-out).
         self.seconds: dict[str, float] = {}
 
     @property
@@ -179,6 +188,7 @@ class LearnedMethod:
             "model": str(self.model_path) if self.model_path else "shipped",
             "fields": "exact" if self.exact_fields else "linearized per chunk",
             "canonical_push_out": self.canonical_push,
+            "preimage_push_out": self.preimage,
         }
         if self.push_out:
             out.update(push_out_eps_m=PUSH_OUT_EPS, push_out_passes=PUSH_OUT_PASSES)
@@ -268,6 +278,7 @@ class LearnedMethod:
         garment_model = GarmentModel(body, self._fields)
         surface = BodySurface(body.faces.numpy(), body.num_vertices) if self.push_out else None
         betas = torch.as_tensor(motion.betas, dtype=torch.float32)
+        boxes = PartBoxes.of(body, betas) if self.preimage else None
         pose = torch.as_tensor(motion.pose, dtype=torch.float32)
         trans = torch.as_tensor(motion.trans, dtype=torch.float32)
         t_frames = motion.num_frames
@@ -293,7 +304,16 @@ class LearnedMethod:
                     # POSE_FRAMES at a time bounds the (t, N, channels) temporaries.
                     for a in range(0, e - s, POSE_FRAMES):
                         b = slice(a, a + POSE_FRAMES)
-                        parts.append(garment_model.pose(x[b], art[b], first_order).vertices)
+                        posed = garment_model.pose(x[b], art[b], first_order)
+                        vertices = posed.vertices
+                        if boxes is not None:
+                            lap("posing")
+                            vertices = preimage_push(
+                                vertices, posed.unposed, art[b].transforms, self._fields, betas,
+                                boxes, PUSH_OUT_EPS,
+                            )  # fmt: skip
+                            lap("preimage")
+                        parts.append(vertices)
                     points = torch.cat(parts).numpy()
                     lap("posing")
                 if carried:
@@ -342,5 +362,21 @@ class LearnedCanonicalMethod(LearnedMethod):
     canonical_push = True
 
 
+class LearnedPreimageMethod(LearnedMethod):
+    """The learned garment pushed out of the body without a search structure per frame: its
+    decoded canonical garment ε out of the canonical body (``learned+canonical``), then each
+    posed vertex ε out of the parts that posing carries it into, found through the body's
+    skinning preimages (:func:`preimage_push`). Not exact: a preimage the fixed point misses,
+    or a vertex between two parts, can stay inside; the winding-number push-out
+    (``learned+postprocess``) is."""
+
+    name = "learned+preimage"
+    canonical_push = True
+    preimage = True
+
+
 #: The registry names of the learned methods (they take a model directory).
-LEARNED_METHODS = (LearnedMethod.name, LearnedCanonicalMethod.name, LearnedPushOutMethod.name)
+LEARNED_METHODS = (
+    LearnedMethod.name, LearnedCanonicalMethod.name, LearnedPreimageMethod.name,
+    LearnedPushOutMethod.name,
+)  # fmt: skip

@@ -1,0 +1,116 @@
+"""Posed garments pushed out of the posed body through the body's skinning preimages, with no
+search structure per frame (the learned method's "learned+preimage").
+
+A posed point p lies inside the posed body where some canonical point q that the body's linear
+blend skinning carries to p lies inside the canonical body (away from where the body intersects
+itself). A garment vertex has its own preimage, its decoded canonical position X, which
+``push_out_canonical`` keeps out of the canonical body. Its other preimages are where posing puts
+it into another part: a sleeve carried into the chest by an arm lowered against the trunk. They
+are searched per joint j: the rigid guess R_jᵀ(p − t_j) (the point in the rest frame of j's
+bone), kept where it falls in the box of j's part of the rest body and away from the vertex's own
+preimage, then refined by fixed-point steps of inverse skinning with the body's diffused fields
+(as the projection unposes garments). A refined guess that skins back to p is a preimage; where
+it lies less than ε outside the canonical body (the baked SDF), p moves by the skinned normal
+until it is ε outside.
+
+Shapes: T frames, N garment vertices, J = 24 joints, M candidate (frame, vertex) pairs of a
+joint, K = 10 shape coefficients. Units: metres.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from usd_garment.body.lbs import inverse_skin
+from usd_garment.body.model import BodyModel
+from usd_garment.canonical.push_out import sdf_and_normal
+from usd_garment.fields.body_fields import BodyFields
+
+#: Margin (m) around each part's box in its bone's rest frame.
+BOX_MARGIN = 0.01
+#: A rigid guess nearer than this (m) to the vertex's own preimage is taken to be that one: the
+#: bones around a vertex turn apart by a few degrees, which moves the rigid guesses of its own
+#: preimage by up to a few centimetres.
+OWN_DISTANCE = 0.04
+#: Fixed-point steps of inverse skinning refining a rigid guess.
+PREIMAGE_STEPS = 3
+#: A refined guess is a preimage where it skins to within this (m) of the vertex.
+PREIMAGE_TOLERANCE = 1e-3
+
+
+@dataclass(frozen=True)
+class PartBoxes:
+    """Axis-aligned boxes ``(J, 3)`` (m) of each joint's part of the shaped rest body (the
+    vertices whose largest skinning weight is that joint's), widened by a margin, in the rest
+    frame; a joint that dominates no vertex gets an empty box."""
+
+    lower: torch.Tensor
+    upper: torch.Tensor
+
+    @classmethod
+    def of(cls, body: BodyModel, betas: torch.Tensor, margin: float = BOX_MARGIN) -> PartBoxes:
+        """The boxes of ``body`` shaped by ``betas`` ``(K,)``."""
+        with torch.no_grad():
+            shaped, _ = body.shaped(betas[None].float())
+        part = body.weights.argmax(dim=1)  # (V,)
+        joints = body.weights.shape[1]
+        lower = torch.full((joints, 3), float("inf"))
+        upper = torch.full((joints, 3), float("-inf"))
+        lower = lower.scatter_reduce(0, part[:, None].expand(-1, 3), shaped[0], "amin")
+        upper = upper.scatter_reduce(0, part[:, None].expand(-1, 3), shaped[0], "amax")
+        return cls(lower - margin, upper + margin)
+
+
+def preimage_push(
+    points: torch.Tensor,
+    own: torch.Tensor,
+    transforms: torch.Tensor,
+    fields: BodyFields,
+    betas: torch.Tensor,
+    boxes: PartBoxes,
+    epsilon: float,
+) -> torch.Tensor:
+    """Posed garments ``(T, N, 3)`` with every vertex that has another preimage less than
+    ``epsilon`` outside the canonical body moved to ``epsilon`` outside (one move per joint,
+    joints in order).
+
+    Args:
+        points: ``(T, N, 3)`` posed garment vertices (m).
+        own: ``(T, N, 3)`` their own preimages in the rest frame, X + B̃s(X)·β
+            (``GarmentOutput.unposed``).
+        transforms: ``(T, J, 4, 4)`` the body's skinning transforms (``Articulation``).
+        fields: the body's diffused fields and canonical SDF (without pose blendshapes).
+        betas: ``(K,)`` the body shape.
+        boxes: ``PartBoxes.of(body, betas)``.
+        epsilon: distance (m) outside the body the moved vertices end at.
+    """
+    out = points.clone()
+    rotation, translation = transforms[..., :3, :3], transforms[..., :3, 3]
+    with torch.no_grad():
+        for j in range(transforms.shape[1]):
+            # (p - t) R, i.e. Rᵀ(p - t) for each point: the rigid guess in j's rest frame.
+            guess = torch.einsum("tnc,tcd->tnd", out - translation[:, j, None], rotation[:, j])
+            keep = ((guess > boxes.lower[j]) & (guess < boxes.upper[j])).all(-1)
+            keep &= (guess - own).norm(dim=-1) > OWN_DISTANCE
+            frame, vertex = keep.nonzero(as_tuple=True)
+            if frame.numel() == 0:
+                continue
+            target, frames = out[frame, vertex], transforms[frame]  # (M, 3), (M, J, 4, 4)
+            _, offset = fields.shaped(guess[frame, vertex], betas)
+            x = guess[frame, vertex] - offset
+            for _ in range(PREIMAGE_STEPS):
+                weights, offset = fields.shaped(x, betas)
+                x = inverse_skin(target[:, None], weights[:, None], frames)[:, 0] - offset
+            weights, offset = fields.shaped(x, betas)
+            rest = inverse_skin(target[:, None], weights[:, None], frames)[:, 0]
+            found = (rest - (x + offset)).norm(dim=-1) < PREIMAGE_TOLERANCE
+            distance, normal = sdf_and_normal(fields.sdf, x)
+            hit = found & (distance < epsilon)
+            if not bool(hit.any()):
+                continue
+            blend = torch.einsum("mj,mjcd->mcd", weights[hit], frames[hit, :, :3, :3])
+            move = torch.einsum("mcd,md->mc", blend, normal[hit])
+            out[frame[hit], vertex[hit]] += (epsilon - distance[hit])[:, None] * move
+    return out
