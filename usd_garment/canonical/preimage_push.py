@@ -35,9 +35,12 @@ BOX_MARGIN = 0.01
 #: preimage by up to a few centimetres.
 OWN_DISTANCE = 0.04
 #: Fixed-point steps of inverse skinning refining a rigid guess.
-PREIMAGE_STEPS = 3
+PREIMAGE_STEPS = 5
 #: A refined guess is a preimage where it skins to within this (m) of the vertex.
 PREIMAGE_TOLERANCE = 1e-3
+#: Passes over the joints; a later pass revisits only the vertices the one before moved (a move
+#: out of one part can end inside a part checked before it, where the spine's parts meet).
+PASSES = 2
 
 
 @dataclass(frozen=True)
@@ -74,7 +77,7 @@ def preimage_push(
 ) -> torch.Tensor:
     """Posed garments ``(T, N, 3)`` with every vertex that has another preimage less than
     ``epsilon`` outside the canonical body moved to ``epsilon`` outside (one move per joint,
-    joints in order).
+    joints in order, in up to :data:`PASSES` passes).
 
     Args:
         points: ``(T, N, 3)`` posed garment vertices (m).
@@ -87,30 +90,54 @@ def preimage_push(
         epsilon: distance (m) outside the body the moved vertices end at.
     """
     out = points.clone()
-    rotation, translation = transforms[..., :3, :3], transforms[..., :3, 3]
+    visit = torch.ones(points.shape[:2], dtype=torch.bool)  # (T, N): the vertices this pass sees
     with torch.no_grad():
-        for j in range(transforms.shape[1]):
-            # (p - t) R, i.e. Rᵀ(p - t) for each point: the rigid guess in j's rest frame.
-            guess = torch.einsum("tnc,tcd->tnd", out - translation[:, j, None], rotation[:, j])
-            keep = ((guess > boxes.lower[j]) & (guess < boxes.upper[j])).all(-1)
-            keep &= (guess - own).norm(dim=-1) > OWN_DISTANCE
-            frame, vertex = keep.nonzero(as_tuple=True)
-            if frame.numel() == 0:
-                continue
-            target, frames = out[frame, vertex], transforms[frame]  # (M, 3), (M, J, 4, 4)
-            _, offset = fields.shaped(guess[frame, vertex], betas)
-            x = guess[frame, vertex] - offset
-            for _ in range(PREIMAGE_STEPS):
-                weights, offset = fields.shaped(x, betas)
-                x = inverse_skin(target[:, None], weights[:, None], frames)[:, 0] - offset
-            weights, offset = fields.shaped(x, betas)
-            rest = inverse_skin(target[:, None], weights[:, None], frames)[:, 0]
-            found = (rest - (x + offset)).norm(dim=-1) < PREIMAGE_TOLERANCE
-            distance, normal = sdf_and_normal(fields.sdf, x)
-            hit = found & (distance < epsilon)
-            if not bool(hit.any()):
-                continue
-            blend = torch.einsum("mj,mjcd->mcd", weights[hit], frames[hit, :, :3, :3])
-            move = torch.einsum("mcd,md->mc", blend, normal[hit])
-            out[frame[hit], vertex[hit]] += (epsilon - distance[hit])[:, None] * move
+        for _ in range(PASSES):
+            moved = torch.zeros_like(visit)
+            for j in range(transforms.shape[1]):
+                _push_part(out, own, transforms, fields, betas, boxes, epsilon, j, visit, moved)
+            visit = moved
+            if not bool(visit.any()):
+                break
     return out
+
+
+def _push_part(
+    out: torch.Tensor,
+    own: torch.Tensor,
+    transforms: torch.Tensor,
+    fields: BodyFields,
+    betas: torch.Tensor,
+    boxes: PartBoxes,
+    epsilon: float,
+    j: int,
+    visit: torch.Tensor,
+    moved: torch.Tensor,
+) -> None:
+    """One joint's step of :func:`preimage_push` on the vertices ``visit`` ``(T, N)`` of
+    ``out`` ``(T, N, 3)``, in place; the vertices it moves are set in ``moved``."""
+    # (p - t) R, i.e. Rᵀ(p - t) for each point: the rigid guess in j's rest frame.
+    bone = transforms[:, j]  # (T, 4, 4)
+    guess = torch.einsum("tnc,tcd->tnd", out - bone[:, None, :3, 3], bone[:, :3, :3])
+    keep = visit & ((guess > boxes.lower[j]) & (guess < boxes.upper[j])).all(-1)
+    keep &= (guess - own).norm(dim=-1) > OWN_DISTANCE
+    frame, vertex = keep.nonzero(as_tuple=True)
+    if frame.numel() == 0:
+        return
+    target, frames = out[frame, vertex], transforms[frame]  # (M, 3), (M, J, 4, 4)
+    _, offset = fields.shaped(guess[frame, vertex], betas)
+    x = guess[frame, vertex] - offset
+    for _ in range(PREIMAGE_STEPS):
+        weights, offset = fields.shaped(x, betas)
+        x = inverse_skin(target[:, None], weights[:, None], frames)[:, 0] - offset
+    weights, offset = fields.shaped(x, betas)
+    rest = inverse_skin(target[:, None], weights[:, None], frames)[:, 0]
+    found = (rest - (x + offset)).norm(dim=-1) < PREIMAGE_TOLERANCE
+    distance, normal = sdf_and_normal(fields.sdf, x)
+    hit = found & (distance < epsilon)
+    if not bool(hit.any()):
+        return
+    blend = torch.einsum("mj,mjcd->mcd", weights[hit], frames[hit, :, :3, :3])
+    move = torch.einsum("mcd,md->mc", blend, normal[hit])
+    out[frame[hit], vertex[hit]] += (epsilon - distance[hit])[:, None] * move
+    moved[frame[hit], vertex[hit]] = True
