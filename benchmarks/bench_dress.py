@@ -1,8 +1,9 @@
 """Benchmark of the stage processor on a 1,000-frame 30 fps procedural animation: ``dress`` with
 the default method (the learned one where a model ships), with ``learned+canonical`` (the
-decoded garment pushed out of the canonical body) and with ``lbs``, in-process (read, compute,
-write; the learned methods' stages in ms per frame: model loading, pose code and GRU, decoder,
-canonical push-out, fields, posing) and first through the CLI, ``--cli-repeat`` times (3; with
+decoded garment pushed out of the canonical body), with ``learned+preimage`` (and then out of the
+parts posing carries it into) and with ``lbs``, in-process (read, compute, write; the learned
+methods' stages in ms per frame: model loading, pose code and GRU, decoder, canonical push-out,
+fields, posing, preimage push-out) and first through the CLI, ``--cli-repeat`` times (3; with
 the interpreter's start);
 ``learned+postprocess`` (``dress --quality final``), ``lbs+postprocess`` and the physics
 simulation on slices of the same animation; the ratios between them.
@@ -131,7 +132,7 @@ def main() -> None:
         cli_runs(body_usd, folder, args.cli_repeat, args.frames)
         runs = {}
         best = f", fastest of {args.repeat} runs" if args.repeat > 1 else ""
-        for method in dict.fromkeys((default, "learned+canonical", "lbs")):
+        for method in dict.fromkeys((default, "learned+canonical", "learned+preimage", "lbs")):
             runs[method], instance = fastest(lambda m=method: get_method(m), body_usd,
                                              folder / f"{method}.usdc", args.repeat)  # fmt: skip
             report(f"{method} (in-process{best})", runs[method])
@@ -157,6 +158,10 @@ def main() -> None:
         for method in [label for label, _ in models] + list(slices):
             print(f"ratio: {default} is {fps[default] / fps[method]:.1f}x faster end to end than "
                   f"{method}")  # fmt: skip
+        if "learned+preimage" in fps:
+            print("ratio: learned+preimage is "
+                  f"{fps['learned+preimage'] / fps['learned+postprocess']:.1f}x faster end to end "
+                  "than learned+postprocess")  # fmt: skip
 
 
 if __name__ == "__main__":

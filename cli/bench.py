@@ -27,7 +27,10 @@ from usd_garment.methods.simulation import SimulationMethod
 from usd_garment.training.dataset import dataset_layers
 
 #: Methods benched when none is named (the learned one only where a model ships).
-DEFAULT_METHODS = ("learned", "learned+canonical", "learned+postprocess", "lbs", "lbs+postprocess")
+DEFAULT_METHODS = (
+    "learned", "learned+canonical", "learned+preimage", "learned+postprocess", "lbs",
+    "lbs+postprocess",
+)  # fmt: skip
 
 
 def _labelled_models(values: tuple[str, ...]) -> list[tuple[str, Path]]:
@@ -123,8 +126,8 @@ def _plain(value: object) -> object:
     "names",
     multiple=True,
     type=click.Choice(available_methods()),
-    help="Methods to bench (repeat); default: learned, learned+canonical and learned+postprocess "
-    "(where a model ships), lbs, lbs+postprocess.",
+    help="Methods to bench (repeat); default: learned, learned+canonical, learned+preimage and "
+    "learned+postprocess (where a model ships), lbs, lbs+postprocess.",
 )
 @click.option(
     "--model",
