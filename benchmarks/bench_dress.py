@@ -158,10 +158,9 @@ def main() -> None:
         for method in [label for label, _ in models] + list(slices):
             print(f"ratio: {default} is {fps[default] / fps[method]:.1f}x faster end to end than "
                   f"{method}")  # fmt: skip
-        if "learned+preimage" in fps:
-            print("ratio: learned+preimage is "
-                  f"{fps['learned+preimage'] / fps['learned+postprocess']:.1f}x faster end to end "
-                  "than learned+postprocess")  # fmt: skip
+        print("ratio: learned+preimage is "
+              f"{fps['learned+preimage'] / fps['learned+postprocess']:.1f}x faster end to end "
+              "than learned+postprocess")  # fmt: skip
 
 
 if __name__ == "__main__":

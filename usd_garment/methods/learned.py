@@ -88,14 +88,9 @@ def learned_method(name: str, model: str | Path | None = None) -> LearnedMethod:
     Raises:
         ValueError: ``name`` is not a learned method.
     """
-    if name == LearnedMethod.name:
-        return LearnedMethod(model)
-    if name == LearnedPushOutMethod.name:
-        return LearnedPushOutMethod(model)
-    if name == LearnedCanonicalMethod.name:
-        return LearnedCanonicalMethod(model)
-    if name == LearnedPreimageMethod.name:
-        return LearnedPreimageMethod(model)
+    for kind in LEARNED_CLASSES:
+        if kind.name == name:
+            return kind(model)
     raise ValueError(f"'{name}' is not a learned method ({', '.join(LEARNED_METHODS)})")
 
 
@@ -375,8 +370,9 @@ class LearnedPreimageMethod(LearnedMethod):
     preimage = True
 
 
-#: The registry names of the learned methods (they take a model directory).
-LEARNED_METHODS = (
-    LearnedMethod.name, LearnedCanonicalMethod.name, LearnedPreimageMethod.name,
-    LearnedPushOutMethod.name,
+#: The learned methods (they take a model directory).
+LEARNED_CLASSES: tuple[type[LearnedMethod], ...] = (
+    LearnedMethod, LearnedCanonicalMethod, LearnedPreimageMethod, LearnedPushOutMethod,
 )  # fmt: skip
+#: Their registry names.
+LEARNED_METHODS = tuple(kind.name for kind in LEARNED_CLASSES)
