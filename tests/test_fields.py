@@ -333,3 +333,12 @@ def test_lookup_of_one_shape_is_the_lookup_contracted_with_its_betas(
     all_weights, shape_dirs, _ = fields.all_fields(points)
     assert torch.allclose(weights, all_weights, atol=1e-6)
     assert torch.allclose(offsets, torch.einsum("bnck,k->bnc", shape_dirs, betas), atol=1e-6)
+    # The grids contracted for the last shape are kept: another shape gets its own, the first
+    # shape again gets the same values, and a shape that needs gradients gets them.
+    other = fields.shaped(points, -betas)[1]
+    assert torch.allclose(other, torch.einsum("bnck,k->bnc", shape_dirs, -betas), atol=1e-6)
+    assert torch.equal(fields.shaped(points, betas)[1], offsets)
+    wanting = betas.clone().requires_grad_(True)
+    fields.shaped(points, wanting)[1].sum().backward()
+    assert wanting.grad is not None
+    assert torch.allclose(wanting.grad, shape_dirs.sum(dim=(0, 1, 2)), rtol=1e-4, atol=1e-4)

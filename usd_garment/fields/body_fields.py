@@ -105,6 +105,9 @@ class BodyFields(torch.nn.Module):
         self.body_name = body_name
         self.config: dict[str, Any] = dict(config or {})
         self.mlp_state = mlp_state
+        #: The last β's offset grids and their key, β and device (see :meth:`_offset_grids`).
+        self._offsets: tuple[tuple[list[float], torch.device], list[SparseGrid], DenseGrid] | None
+        self._offsets = None
 
     @property
     def has_pose_dirs(self) -> bool:
@@ -161,6 +164,19 @@ class BodyFields(torch.nn.Module):
         lead = points.shape[:-1]
         flat = points.reshape(-1, 3).to(self.fields_coarse.origin)
         (raw,) = self._fields(flat, ("weights",))
+        levels, coarse = self._offset_grids(betas)
+        (offsets,) = self._cascade(flat, ("offset",), levels, coarse)
+        return raw.reshape(*lead, -1), offsets.reshape(*lead, 3)
+
+    def _offset_grids(self, betas: torch.Tensor) -> tuple[list[SparseGrid], DenseGrid]:
+        """The levels holding ``shape_dirs`` and the dense grid with one channel group,
+        ``offset`` ``(R, 3)`` (m): the blendshapes contracted with ``betas`` ``(K,)``. The last
+        shape's grids are kept and reused while β is the same (a garment's posing and the
+        preimage search look the fields up many times for one body); a β that needs gradients
+        gets new ones."""
+        key = (betas.detach().cpu().tolist(), self.fields_coarse.origin.device)
+        if self._offsets is not None and self._offsets[0] == key and not betas.requires_grad:
+            return self._offsets[1], self._offsets[2]
         levels = [
             level.with_channels({"offset": _contracted(level.channel("shape_dirs"), betas)})
             for level in self.field_levels
@@ -172,8 +188,9 @@ class BodyFields(torch.nn.Module):
             dense.spacing,
             {"offset": _contracted(dense.channel("shape_dirs"), betas).reshape(*dense.shape, 3)},
         )
-        (offsets,) = self._cascade(flat, ("offset",), levels, coarse)
-        return raw.reshape(*lead, -1), offsets.reshape(*lead, 3)
+        if not betas.requires_grad:
+            self._offsets = (key, levels, coarse)
+        return levels, coarse
 
     def shaped(
         self, points: torch.Tensor, betas: torch.Tensor
