@@ -11,6 +11,7 @@ import torch
 import trimesh
 
 from usd_garment.body.model import BodyModel
+from usd_garment.canonical import preimage_push as preimage
 from usd_garment.canonical.preimage_push import PartBoxes, preimage_push
 from usd_garment.eval.body_distance import BodySurface, signed_distance
 from usd_garment.eval.push_out import PUSH_OUT_EPS
@@ -29,13 +30,21 @@ def _default_body(body_model: BodyModel, synthetic_body: BodyModel) -> BodyModel
     return body_model
 
 
+@pytest.mark.parametrize("early_drops", [True, False])
 def test_a_point_carried_into_the_chest_is_pushed_out(
-    body_model: BodyModel, synthetic_body: BodyModel
+    body_model: BodyModel,
+    synthetic_body: BodyModel,
+    early_drops: bool,
+    monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     """A point 5 mm inside the chest of a bent, arms-down body, whose own preimage lies
     elsewhere (a sleeve vertex's), ends about ε outside; one 2 cm outside the chest, and one
-    whose own preimage is where it is, are left alone."""
+    whose own preimage is where it is, are left alone. The same with every candidate followed
+    through all steps (no early drops)."""
     body = _default_body(body_model, synthetic_body)
+    if not early_drops:
+        monkeypatch.setattr(preimage, "OWN_RADIUS", 0.0)
+        monkeypatch.setattr(preimage, "STEP_BOUND", 1e9)
     fields = load_body_fields()
     betas = torch.zeros(10)
     pose = torch.zeros(1, 24, 3)
@@ -66,7 +75,8 @@ def test_a_point_carried_into_the_chest_is_pushed_out(
 
 
 def test_part_boxes_hold_their_parts(body_model: BodyModel) -> None:
-    """Each joint's box holds the shaped rest vertices whose largest weight is that joint's."""
+    """Each joint's box holds the shaped rest vertices whose largest weight is that joint's,
+    and its ball holds the box; the joints that dominate no vertex have none."""
     betas = torch.linspace(-1.0, 1.0, 10)
     boxes = PartBoxes.of(body_model, betas, margin=0.0)
     with torch.no_grad():
@@ -75,6 +85,11 @@ def test_part_boxes_hold_their_parts(body_model: BodyModel) -> None:
     assert bool((shaped >= boxes.lower[part]).all() & (shaped <= boxes.upper[part]).all())
     for j in part.unique():
         torch.testing.assert_close(boxes.lower[j], shaped[part == j].min(dim=0).values)
+    assert boxes.parts() == part.unique().tolist()
+    centre, radius = boxes.spheres()
+    for j in boxes.parts():  # every corner of a box lies in its ball
+        corners = torch.cartesian_prod(*torch.stack([boxes.lower[j], boxes.upper[j]], dim=1))
+        assert bool(((corners - centre[j]).norm(dim=-1) <= radius[j] + 1e-6).all())
 
 
 def test_learned_preimage_leaves_fewer_vertices_inside(

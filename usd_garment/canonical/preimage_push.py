@@ -7,11 +7,13 @@ itself). A garment vertex has its own preimage, its decoded canonical position X
 ``push_out_canonical`` keeps out of the canonical body. Its other preimages are where posing puts
 it into another part: a sleeve carried into the chest by an arm lowered against the trunk. They
 are searched per joint j: the rigid guess R_jᵀ(p − t_j) (the point in the rest frame of j's
-bone), kept where it falls in the box of j's part of the rest body and away from the vertex's own
-preimage, then refined by fixed-point steps of inverse skinning with the body's diffused fields
-(as the projection unposes garments). A refined guess that skins back to p is a preimage; where
-it lies less than ε outside the canonical body (the baked SDF), p moves by the skinned normal
-until it is ε outside.
+bone), kept where it falls in the box of j's part of the rest body (the posed ball round the box
+sorts out most vertices first) and away from the vertex's own preimage, then refined by
+fixed-point steps of inverse skinning with the body's diffused fields (as the projection unposes
+garments; a step that turns back on the one before is shortened). Guesses that converge on the
+vertex's own preimage, or cannot end near the canonical body, are dropped after each step. A
+refined guess that skins back to p is a preimage; where it lies less than ε outside the
+canonical body (the baked SDF), p moves by the skinned normal until it is ε outside.
 
 Shapes: T frames, N garment vertices, J = 24 joints, M candidate (frame, vertex) pairs of a
 joint, K = 10 shape coefficients. Units: metres.
@@ -35,7 +37,15 @@ BOX_MARGIN = 0.01
 #: preimage by up to a few centimetres.
 OWN_DISTANCE = 0.04
 #: Fixed-point steps of inverse skinning refining a rigid guess.
-PREIMAGE_STEPS = 5
+PREIMAGE_STEPS = 8
+#: A step that turns back on the one before is shortened by this factor: where the skinning
+#: weights turn fast (between two bones) the plain steps oscillate about the fixed point.
+DAMPING = 0.5
+#: A refined guess this near (m) to the vertex's own preimage after a step is converging on it.
+OWN_RADIUS = 0.01
+#: The fixed point is taken to lie at most this many times a step's length from where the step
+#: began (steps that shrink by half or more each time).
+STEP_BOUND = 2.0
 #: A refined guess is a preimage where it skins to within this (m) of the vertex.
 PREIMAGE_TOLERANCE = 1e-3
 #: Passes over the joints; a later pass revisits only the vertices the one before moved (a move
@@ -64,6 +74,15 @@ class PartBoxes:
         lower = lower.scatter_reduce(0, part[:, None].expand(-1, 3), shaped[0], "amin")
         upper = upper.scatter_reduce(0, part[:, None].expand(-1, 3), shaped[0], "amax")
         return cls(lower - margin, upper + margin)
+
+    def parts(self) -> list[int]:
+        """The joints whose box is not empty."""
+        return torch.nonzero((self.lower <= self.upper).all(-1))[:, 0].tolist()
+
+    def spheres(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """Centres ``(J, 3)`` (m, rest frame) and radii ``(J,)`` (m) of the balls round the
+        boxes."""
+        return (self.lower + self.upper) / 2, (self.upper - self.lower).norm(dim=-1) / 2
 
 
 def preimage_push(
@@ -94,7 +113,7 @@ def preimage_push(
     with torch.no_grad():
         for _ in range(PASSES):
             moved = torch.zeros_like(visit)
-            for j in range(transforms.shape[1]):
+            for j in boxes.parts():
                 _push_part(out, own, transforms, fields, betas, boxes, epsilon, j, visit, moved)
             visit = moved
             if not bool(visit.any()):
@@ -116,28 +135,69 @@ def _push_part(
 ) -> None:
     """One joint's step of :func:`preimage_push` on the vertices ``visit`` ``(T, N)`` of
     ``out`` ``(T, N, 3)``, in place; the vertices it moves are set in ``moved``."""
-    # (p - t) R, i.e. Rᵀ(p - t) for each point: the rigid guess in j's rest frame.
     bone = transforms[:, j]  # (T, 4, 4)
-    guess = torch.einsum("tnc,tcd->tnd", out - bone[:, None, :3, 3], bone[:, :3, :3])
-    keep = visit & ((guess > boxes.lower[j]) & (guess < boxes.upper[j])).all(-1)
-    keep &= (guess - own).norm(dim=-1) > OWN_DISTANCE
-    frame, vertex = keep.nonzero(as_tuple=True)
+    centre, radius = (v[j] for v in boxes.spheres())
+    posed = bone[:, :3, :3] @ centre + bone[:, :3, 3]  # (T, 3): the ball's centre, posed
+    near = visit & ((out - posed[:, None]).square().sum(-1) < radius**2)
+    frame, vertex = near.nonzero(as_tuple=True)
+    # (p - t) R, i.e. Rᵀ(p - t) for each point: the rigid guess in j's rest frame.
+    guess = torch.einsum("mc,mcd->md", out[frame, vertex] - bone[frame, :3, 3], bone[frame, :3, :3])
+    keep = ((guess > boxes.lower[j]) & (guess < boxes.upper[j])).all(-1)
+    keep &= (guess - own[frame, vertex]).square().sum(-1) > OWN_DISTANCE**2
+    frame, vertex, guess = frame[keep], vertex[keep], guess[keep]
     if frame.numel() == 0:
         return
     target, frames = out[frame, vertex], transforms[frame]  # (M, 3), (M, J, 4, 4)
-    _, offset = fields.shaped(guess[frame, vertex], betas)
-    x = guess[frame, vertex] - offset
-    for _ in range(PREIMAGE_STEPS):
-        weights, offset = fields.shaped(x, betas)
-        x = inverse_skin(target[:, None], weights[:, None], frames)[:, 0] - offset
-    weights, offset = fields.shaped(x, betas)
-    rest = inverse_skin(target[:, None], weights[:, None], frames)[:, 0]
-    found = (rest - (x + offset)).norm(dim=-1) < PREIMAGE_TOLERANCE
+    x, weights, kept = _refine(guess, target, frames, own[frame, vertex], fields, betas, epsilon)
+    if kept.numel() == 0:
+        return
     distance, normal = sdf_and_normal(fields.sdf, x)
-    hit = found & (distance < epsilon)
+    hit = distance < epsilon
     if not bool(hit.any()):
         return
-    blend = torch.einsum("mj,mjcd->mcd", weights[hit], frames[hit, :, :3, :3])
+    frame, vertex = frame[kept][hit], vertex[kept][hit]
+    blend = torch.einsum("mj,mjcd->mcd", weights[hit], frames[kept][hit, :, :3, :3])
     move = torch.einsum("mcd,md->mc", blend, normal[hit])
-    out[frame[hit], vertex[hit]] += (epsilon - distance[hit])[:, None] * move
-    moved[frame[hit], vertex[hit]] = True
+    out[frame, vertex] += (epsilon - distance[hit])[:, None] * move
+    moved[frame, vertex] = True
+
+
+def _refine(
+    x: torch.Tensor,
+    target: torch.Tensor,
+    frames: torch.Tensor,
+    own: torch.Tensor,
+    fields: BodyFields,
+    betas: torch.Tensor,
+    epsilon: float,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The canonical preimages that :data:`PREIMAGE_STEPS` fixed-point steps of inverse
+    skinning find from the rigid guesses ``x`` ``(M, 3)`` of the posed points ``target``
+    ``(M, 3)`` (skinning transforms ``frames`` ``(M, J, 4, 4)``; ``own`` ``(M, 3)`` the points'
+    own preimages, shaped): those ``(F, 3)`` that skin back to within
+    :data:`PREIMAGE_TOLERANCE` and may lie less than ``epsilon`` outside the canonical body,
+    their skinning weights ``(F, J)`` and their indices ``(F,)`` into the M guesses.
+
+    After the first step a candidate is dropped where it comes within :data:`OWN_RADIUS` of its
+    own preimage (the steps converge on that one) or where its SDF is more than ``epsilon``
+    even :data:`STEP_BOUND` times its next step closer (the SDF is 1-Lipschitz, and the
+    fixed point is about that far off), so later steps look up the fields for a few only.
+    """
+    kept, last = torch.arange(x.shape[0]), torch.zeros_like(x)
+    for step in range(PREIMAGE_STEPS + 1):
+        weights, offset = fields.shaped(x, betas)
+        delta = inverse_skin(target[:, None], weights[:, None], frames)[:, 0] - offset - x
+        shift = delta.norm(dim=-1)
+        if step == PREIMAGE_STEPS:
+            break
+        if step > 0:
+            stay = (x + offset - own).norm(dim=-1) > OWN_RADIUS
+            stay &= fields.sdf(x) - STEP_BOUND * shift < epsilon
+            kept, x, delta, last = kept[stay], x[stay], delta[stay], last[stay]
+            target, frames, own = target[stay], frames[stay], own[stay]
+            if kept.numel() == 0:
+                return x, weights[:0], kept
+        x = x + torch.where((delta * last).sum(-1, keepdim=True) < 0, DAMPING, 1.0) * delta
+        last = delta
+    found = shift < PREIMAGE_TOLERANCE
+    return x[found], weights[found], kept[found]
