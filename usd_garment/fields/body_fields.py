@@ -175,8 +175,9 @@ class BodyFields(torch.nn.Module):
         preimage search look the fields up many times for one body); a β that needs gradients
         gets new ones."""
         key = (betas.detach().cpu().tolist(), self.fields_coarse.origin.device)
-        if self._offsets is not None and self._offsets[0] == key and not betas.requires_grad:
-            return self._offsets[1], self._offsets[2]
+        last = self._offsets  # read once: another thread may replace it
+        if last is not None and last[0] == key and not betas.requires_grad:
+            return last[1], last[2]
         levels = [
             level.with_channels({"offset": _contracted(level.channel("shape_dirs"), betas)})
             for level in self.field_levels
