@@ -3,6 +3,7 @@ preimages (``learned+preimage``), judged by the winding-number query."""
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -92,14 +93,20 @@ def test_part_boxes_hold_their_parts(body_model: BodyModel) -> None:
         assert bool(((corners - centre[j]).norm(dim=-1) <= radius[j] + 1e-6).all())
 
 
+@pytest.mark.parametrize(("beta1", "share"), [(0.0, 1 / 5), (3.0, 1 / 2)])
 def test_learned_preimage_leaves_fewer_vertices_inside(
-    body_model: BodyModel, synthetic_body: BodyModel
+    body_model: BodyModel, synthetic_body: BodyModel, beta1: float, share: float
 ) -> None:
     """On the example walk the shipped T-shirt leaves vertices inside the body elsewhere than
     where the pose forces it; ``learned+preimage`` leaves at most a fifth of them, moving the
-    garment less than 0.2 mm on average and no vertex 5 cm."""
+    garment less than 0.2 mm on average and no vertex 5 cm. On a strong body shape (β₁ = 3,
+    whose rest body lies centimetres from the canonical one) at most half (stop 46's search,
+    started in the wrong frame, left 0.79 of them)."""
     body = _default_body(body_model, synthetic_body)
     motion, _ = read_smpl_motion(WALK, body)
+    betas = np.zeros_like(motion.betas)
+    betas[0] = beta1
+    motion = dataclasses.replace(motion, betas=betas)
     template = load_template("tshirt", "high")
     learned = LearnedMethod().predict(motion, body, template)
     pushed = LearnedPreimageMethod().predict(motion, body, template)
@@ -111,6 +118,6 @@ def test_learned_preimage_leaves_fewer_vertices_inside(
     surface = BodySurface(body.faces.numpy(), body.num_vertices)
     before = signed_distance(learned, posed, surface).elsewhere.mean()
     after = signed_distance(pushed, posed, surface).elsewhere.mean()
-    assert before > 1e-3 and after < before / 5, (before, after)
+    assert before > 1e-3 and after < before * share, (before, after)
     moved = np.linalg.norm(pushed - learned, axis=-1)
     assert moved.mean() < 2e-4 and moved.max() < 5e-2, (moved.mean(), moved.max())

@@ -184,6 +184,7 @@ def _refine(
     even :data:`STEP_BOUND` times its next step closer (the SDF is 1-Lipschitz, and the
     fixed point is about that far off), so later steps look up the fields for a few only.
     """
+    x = x - fields.shaped(x, betas)[1]  # the rigid guess is in the shaped rest frame
     kept, last = torch.arange(x.shape[0]), torch.zeros_like(x)
     for step in range(PREIMAGE_STEPS + 1):
         weights, offset = fields.shaped(x, betas)
