@@ -173,11 +173,11 @@ def _refine(
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """The canonical preimages that :data:`PREIMAGE_STEPS` fixed-point steps of inverse
     skinning (a step that turns back on the one before shortened by :data:`DAMPING`) find from
-    the rigid guesses ``x`` ``(M, 3)`` of the posed points ``target`` ``(M, 3)`` (skinning
-    transforms ``frames`` ``(M, J, 4, 4)``; ``own`` ``(M, 3)`` the points' own preimages,
-    shaped): those ``(F, 3)`` that skin back to within :data:`PREIMAGE_TOLERANCE` and may lie
-    less than ``epsilon`` outside the canonical body, their skinning weights ``(F, J)`` and
-    their indices ``(F,)`` into the M guesses.
+    the rigid guesses ``x`` ``(M, 3)`` (shaped rest frame) of the posed points ``target``
+    ``(M, 3)`` (skinning transforms ``frames`` ``(M, J, 4, 4)``; ``own`` ``(M, 3)`` the points'
+    own preimages, shaped): those ``(F, 3)`` that skin back to within
+    :data:`PREIMAGE_TOLERANCE` and may lie less than ``epsilon`` outside the canonical body,
+    their skinning weights ``(F, J)`` and their indices ``(F,)`` into the M guesses.
 
     After the first step a candidate is dropped where it comes within :data:`OWN_RADIUS` of its
     own preimage (the steps converge on that one) or where its SDF is more than ``epsilon``
