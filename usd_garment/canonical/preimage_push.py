@@ -140,23 +140,25 @@ def _push_part(
     posed = bone[:, :3, :3] @ centre + bone[:, :3, 3]  # (T, 3): the ball's centre, posed
     near = visit & ((out - posed[:, None]).square().sum(-1) < radius**2)
     frame, vertex = near.nonzero(as_tuple=True)
+    target, mine = out[frame, vertex], own[frame, vertex]
     # (p - t) R, i.e. Rᵀ(p - t) for each point: the rigid guess in j's rest frame.
-    guess = torch.einsum("mc,mcd->md", out[frame, vertex] - bone[frame, :3, 3], bone[frame, :3, :3])
+    guess = torch.einsum("mc,mcd->md", target - bone[frame, :3, 3], bone[frame, :3, :3])
     keep = ((guess > boxes.lower[j]) & (guess < boxes.upper[j])).all(-1)
-    keep &= (guess - own[frame, vertex]).square().sum(-1) > OWN_DISTANCE**2
-    frame, vertex, guess = frame[keep], vertex[keep], guess[keep]
+    keep &= (guess - mine).square().sum(-1) > OWN_DISTANCE**2
+    frame, vertex, guess, target, mine = (v[keep] for v in (frame, vertex, guess, target, mine))
     if frame.numel() == 0:
         return
-    target, frames = out[frame, vertex], transforms[frame]  # (M, 3), (M, J, 4, 4)
-    x, weights, kept = _refine(guess, target, frames, own[frame, vertex], fields, betas, epsilon)
+    frames = transforms[frame]  # (M, J, 4, 4)
+    x, weights, kept = _refine(guess, target, frames, mine, fields, betas, epsilon)
     if kept.numel() == 0:
         return
     distance, normal = sdf_and_normal(fields.sdf, x)
     hit = distance < epsilon
     if not bool(hit.any()):
         return
-    frame, vertex = frame[kept][hit], vertex[kept][hit]
-    blend = torch.einsum("mj,mjcd->mcd", weights[hit], frames[kept][hit, :, :3, :3])
+    chosen = kept[hit]
+    frame, vertex = frame[chosen], vertex[chosen]
+    blend = torch.einsum("mj,mjcd->mcd", weights[hit], frames[chosen, :, :3, :3])
     move = torch.einsum("mcd,md->mc", blend, normal[hit])
     out[frame, vertex] += (epsilon - distance[hit])[:, None] * move
     moved[frame, vertex] = True
