@@ -36,9 +36,11 @@ def _cell_and_weights(
 
 
 def _interpolate(w: torch.Tensor, table: torch.Tensor, rows: torch.Tensor) -> torch.Tensor:
-    """``(M, C)``: the rows ``(M, 8)`` of ``table`` ``(R, C)`` weighted by ``w`` ``(M, 8)``."""
-    corner_values = table.index_select(0, rows.reshape(-1)).reshape(*rows.shape, -1)
-    return torch.bmm(w[:, None, :], corner_values)[:, 0]
+    """``(M, C)``: the rows ``(M, 8)`` of ``table`` ``(R, C)`` weighted by ``w`` ``(M, 8)``, as
+    one fused weighted gather (``embedding_bag``: no ``(M, 8, C)`` temporary of corner values,
+    which made a gather and a product an order of magnitude slower on a CPU). Differentiable
+    once in ``w`` and ``table``."""
+    return torch.nn.functional.embedding_bag(rows, table, per_sample_weights=w, mode="sum")
 
 
 def _register_channels(module: torch.nn.Module, channels: dict[str, torch.Tensor]) -> None:
