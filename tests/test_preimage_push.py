@@ -76,8 +76,8 @@ def test_a_point_carried_into_the_chest_is_pushed_out(
 
 
 def test_part_boxes_hold_their_parts(body_model: BodyModel) -> None:
-    """Each joint's box holds the shaped rest vertices whose largest weight is that joint's,
-    and its ball holds the box; the joints that dominate no vertex have none."""
+    """Each joint's box holds the shaped rest vertices whose largest weight is that joint's;
+    the joints that dominate no vertex have an empty box."""
     betas = torch.linspace(-1.0, 1.0, 10)
     boxes = PartBoxes.of(body_model, betas, margin=0.0)
     with torch.no_grad():
@@ -86,11 +86,49 @@ def test_part_boxes_hold_their_parts(body_model: BodyModel) -> None:
     assert bool((shaped >= boxes.lower[part]).all() & (shaped <= boxes.upper[part]).all())
     for j in part.unique():
         torch.testing.assert_close(boxes.lower[j], shaped[part == j].min(dim=0).values)
-    assert boxes.parts() == part.unique().tolist()
-    centre, radius = boxes.spheres()
-    for j in boxes.parts():  # every corner of a box lies in its ball
-        corners = torch.cartesian_prod(*torch.stack([boxes.lower[j], boxes.upper[j]], dim=1))
-        assert bool(((corners - centre[j]).norm(dim=-1) <= radius[j] + 1e-6).all())
+    nonempty = torch.nonzero((boxes.lower <= boxes.upper).all(-1))[:, 0]
+    assert nonempty.tolist() == part.unique().tolist()
+
+
+def test_candidates_are_each_joints_rigid_guesses_in_its_box(body_model: BodyModel) -> None:
+    """The rigid guesses made for every joint at once, a few frames at a time, are those made
+    joint by joint: R_jᵀ(p − t_j) in j's box and away from the vertex's own preimage, for the
+    vertices the pass visits only."""
+    gen = torch.Generator().manual_seed(3)
+    betas = torch.zeros(10)
+    pose = 0.4 * torch.randn(11, 24, 3, generator=gen)
+    with torch.no_grad():
+        body = body_model(betas, pose, torch.zeros(11, 3))
+    transforms = body.transforms
+    points = body.vertices[:, ::7] + 0.01 * torch.randn(body.vertices[:, ::7].shape, generator=gen)
+    own = points + 0.05 * torch.randn(points.shape, generator=gen)
+    visit = torch.rand(points.shape[:2], generator=gen) < 0.8
+    boxes = PartBoxes.of(body_model, betas)
+    frame, vertex, guess = preimage._candidates(points, own, transforms, boxes, visit)
+    expected = set()
+    for j in range(24):
+        r, t = transforms[:, j, :3, :3], transforms[:, j, :3, 3]
+        g = torch.einsum("fnc,fcd->fnd", points - t[:, None], r)  # (F, N, 3)
+        hit = ((g > boxes.lower[j]) & (g < boxes.upper[j])).all(-1) & visit
+        hit &= (g - own).norm(dim=-1) > preimage.OWN_DISTANCE
+        expected |= {(int(f), int(n), j) for f, n in hit.nonzero().tolist()}
+    assert len(expected) > 100
+    assert len(frame) == len(expected)
+    for f, n, g in zip(frame.tolist(), vertex.tolist(), guess, strict=True):
+        r, t = transforms[f, :, :3, :3], transforms[f, :, :3, 3]
+        j = int(torch.argmin(((points[f, n] - t)[:, None, :] @ r)[:, 0].sub(g).norm(dim=-1)))
+        assert (f, n, j) in expected
+        torch.testing.assert_close(g, (points[f, n] - t[j]) @ r[j], rtol=0, atol=1e-5)
+
+
+def test_blend_is_the_weighted_sum_of_the_frames_transforms() -> None:
+    gen = torch.Generator().manual_seed(4)
+    transforms = torch.randn(5, 24, 4, 4, generator=gen)
+    weights = torch.rand(40, 24, generator=gen)
+    frame = torch.randint(0, 5, (40,), generator=gen)
+    skin = transforms[..., :3, :].reshape(-1, 12)
+    expected = torch.einsum("mj,mjcd->mcd", weights, transforms[frame, :, :3, :])
+    torch.testing.assert_close(preimage._blend(weights, frame, skin), expected)
 
 
 @pytest.mark.parametrize(("beta1", "share"), [(0.0, 1 / 5), (3.0, 1 / 2)])

@@ -6,26 +6,26 @@ blend skinning carries to p lies inside the canonical body (away from where the 
 itself). A garment vertex has its own preimage, its decoded canonical position X, which
 ``push_out_canonical`` keeps out of the canonical body. Its other preimages are where posing puts
 it into another part: a sleeve carried into the chest by an arm lowered against the trunk. They
-are searched per joint j: the rigid guess R_jᵀ(p − t_j) (the point in the rest frame of j's
-bone), kept where it falls in the box of j's part of the rest body (the posed ball round the box
-sorts out most vertices first) and away from the vertex's own preimage, then refined by
-fixed-point steps of inverse skinning with the body's diffused fields (as the projection unposes
-garments; a step that turns back on the one before is shortened). Guesses that converge on the
-vertex's own preimage, or cannot end near the canonical body, are dropped after each step. A
-refined guess that skins back to p is a preimage; where it lies less than ε outside the
-canonical body (the baked SDF), p moves by the skinned normal until it is ε outside.
+are searched from every joint j at once: the rigid guess R_jᵀ(p − t_j) (the point in the rest
+frame of j's bone), kept where it falls in the box of j's part of the rest body and away from the
+vertex's own preimage, then refined by fixed-point steps of inverse skinning with the body's
+diffused fields (as the projection unposes garments; a step that turns back on the one before is
+shortened). Guesses that converge on the vertex's own preimage, or cannot end near the canonical
+body, are dropped after each step. A refined guess that skins back to p is a preimage; where it
+lies less than ε outside the canonical body (the baked SDF), p moves by the skinned normal until
+it is ε outside (the deepest such preimage of a vertex first; a later pass takes the others).
 
-Shapes: T frames, N garment vertices, J = 24 joints, M candidate (frame, vertex) pairs of a
-joint, K = 10 shape coefficients. Units: metres.
+Shapes: T frames, N garment vertices, J = 24 joints, M candidate (frame, vertex, joint) guesses,
+K = 10 shape coefficients. Units: metres.
 """
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import torch
 
-from usd_garment.body.lbs import inverse_skin
 from usd_garment.body.model import BodyModel
 from usd_garment.canonical.push_out import sdf_and_normal
 from usd_garment.fields.body_fields import BodyFields
@@ -44,13 +44,16 @@ DAMPING = 0.5
 #: A refined guess this near (m) to the vertex's own preimage after a step is converging on it.
 OWN_RADIUS = 0.01
 #: The fixed point is taken to lie at most this many times a step's length from where the step
-#: began (steps that shrink by half or more each time).
+#: ends (steps that shrink by half or more each time leave at most one step's length to go).
 STEP_BOUND = 2.0
 #: A refined guess is a preimage where it skins to within this (m) of the vertex.
 PREIMAGE_TOLERANCE = 1e-3
-#: Passes over the joints; a later pass revisits only the vertices the one before moved (a move
-#: out of one part can end inside a part checked before it, where the spine's parts meet).
-PASSES = 2
+#: Passes; a later pass revisits only the vertices the one before moved (a vertex inside two
+#: parts moves out of the deeper first, and a move out of one part can end inside another, where
+#: the spine's parts meet).
+PASSES = 3
+#: Frames whose rigid guesses (``frames · N · J · 3`` floats) are made at once.
+GUESS_FRAMES = 8
 
 
 @dataclass(frozen=True)
@@ -75,15 +78,6 @@ class PartBoxes:
         upper = upper.scatter_reduce(0, part[:, None].expand(-1, 3), shaped[0], "amax")
         return cls(lower - margin, upper + margin)
 
-    def parts(self) -> list[int]:
-        """The joints whose box is not empty."""
-        return torch.nonzero((self.lower <= self.upper).all(-1))[:, 0].tolist()
-
-    def spheres(self) -> tuple[torch.Tensor, torch.Tensor]:
-        """Centres ``(J, 3)`` (m, rest frame) and radii ``(J,)`` (m) of the balls round the
-        boxes."""
-        return (self.lower + self.upper) / 2, (self.upper - self.lower).norm(dim=-1) / 2
-
 
 def preimage_push(
     points: torch.Tensor,
@@ -95,8 +89,8 @@ def preimage_push(
     epsilon: float,
 ) -> torch.Tensor:
     """Posed garments ``(T, N, 3)`` with every vertex that has another preimage less than
-    ``epsilon`` outside the canonical body moved to ``epsilon`` outside (one move per joint,
-    joints in order, in up to :data:`PASSES` passes).
+    ``epsilon`` outside the canonical body moved to ``epsilon`` outside (in each of up to
+    :data:`PASSES` passes, out of its deepest such preimage).
 
     Args:
         points: ``(T, N, 3)`` posed garment vertices (m).
@@ -110,64 +104,123 @@ def preimage_push(
     """
     out = points.clone()
     visit = torch.ones(points.shape[:2], dtype=torch.bool)  # (T, N): the vertices this pass sees
+    skin = transforms[..., :3, :].reshape(-1, 12)  # (T·J, 12): rows of _blend's product
     with torch.no_grad():
         for _ in range(PASSES):
-            moved = torch.zeros_like(visit)
-            for j in boxes.parts():
-                _push_part(out, own, transforms, fields, betas, boxes, epsilon, j, visit, moved)
-            visit = moved
+            frame, vertex, guess = _candidates(out, own, transforms, boxes, visit)
+            visit = _push(out, own, skin, frame, vertex, guess, fields, betas, epsilon)
             if not bool(visit.any()):
                 break
     return out
 
 
-def _push_part(
-    out: torch.Tensor,
+def _candidates(
+    points: torch.Tensor,
     own: torch.Tensor,
     transforms: torch.Tensor,
+    boxes: PartBoxes,
+    visit: torch.Tensor,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The rigid guesses ``(M, 3)`` (shaped rest frame) of the vertices ``visit`` ``(T, N)`` of
+    ``points`` ``(T, N, 3)`` that fall in their joint's box, farther than
+    :data:`OWN_DISTANCE` from the vertex's own preimage (``own``), with their frame and vertex
+    indices ``(M,)``, GUESS_FRAMES frames at a time."""
+    t_frames, n, _ = points.shape
+    joints = transforms.shape[1]
+    rotation = transforms[..., :3, :3]  # (T, J, 3, 3)
+    # (p − t) R = p R − t R for every joint: one product with the rotations side by side,
+    # axis-major (each axis's J columns together, so that each comparison below reads them
+    # contiguously).
+    side = rotation.permute(0, 2, 3, 1).reshape(t_frames, 3, 3 * joints)
+    shift = torch.einsum("tjc,tjcd->tdj", transforms[..., :3, 3], rotation)
+    found: list[tuple[torch.Tensor, torch.Tensor, torch.Tensor]] = []
+    for a in range(0, t_frames, GUESS_FRAMES):
+        b = min(a + GUESS_FRAMES, t_frames)
+        columns = torch.nonzero(visit[a:b].any(0))[:, 0]  # the vertices seen in these frames
+        if columns.numel() == 0:
+            continue
+        p = points[a:b] if columns.numel() == n else points[a:b, columns]
+        guess = torch.baddbmm(shift[a:b].reshape(b - a, 1, -1), p, side[a:b], beta=-1)
+        guess = guess.view(b - a, columns.numel(), 3, joints)
+        inside = guess[:, :, 0] > boxes.lower[:, 0]  # (t, n, J)
+        inside &= guess[:, :, 0] < boxes.upper[:, 0]
+        for axis in (1, 2):  # axis by axis: twice as fast as one comparison and .all(-1)
+            inside &= guess[:, :, axis] > boxes.lower[:, axis]
+            inside &= guess[:, :, axis] < boxes.upper[:, axis]
+        inside &= visit[a:b, columns, None]
+        frame, column, joint = inside.nonzero(as_tuple=True)
+        g, frame, vertex = guess[frame, column, :, joint], frame + a, columns[column]
+        far = (g - own[frame, vertex]).square().sum(-1) > OWN_DISTANCE**2
+        found.append((frame[far], vertex[far], g[far]))
+    if not found:
+        empty = torch.zeros(0, dtype=torch.long)
+        return empty, empty, points.new_zeros(0, 3)
+    frame, vertex, guess = (torch.cat(v) for v in zip(*found, strict=True))
+    return frame, vertex, guess
+
+
+def _push(
+    out: torch.Tensor,
+    own: torch.Tensor,
+    skin: torch.Tensor,
+    frame: torch.Tensor,
+    vertex: torch.Tensor,
+    guess: torch.Tensor,
     fields: BodyFields,
     betas: torch.Tensor,
-    boxes: PartBoxes,
     epsilon: float,
-    j: int,
-    visit: torch.Tensor,
-    moved: torch.Tensor,
-) -> None:
-    """One joint's step of :func:`preimage_push` on the vertices ``visit`` ``(T, N)`` of
-    ``out`` ``(T, N, 3)``, in place; the vertices it moves are set in ``moved``."""
-    bone = transforms[:, j]  # (T, 4, 4)
-    centre, radius = (v[j] for v in boxes.spheres())
-    posed = bone[:, :3, :3] @ centre + bone[:, :3, 3]  # (T, 3): the ball's centre, posed
-    near = visit & ((out - posed[:, None]).square().sum(-1) < radius**2)
-    frame, vertex = near.nonzero(as_tuple=True)
-    target, mine = out[frame, vertex], own[frame, vertex]
-    # (p - t) R, i.e. Rᵀ(p - t) for each point: the rigid guess in j's rest frame.
-    guess = torch.einsum("mc,mcd->md", target - bone[frame, :3, 3], bone[frame, :3, :3])
-    keep = ((guess > boxes.lower[j]) & (guess < boxes.upper[j])).all(-1)
-    keep &= (guess - mine).square().sum(-1) > OWN_DISTANCE**2
-    frame, vertex, guess, target, mine = (v[keep] for v in (frame, vertex, guess, target, mine))
+) -> torch.Tensor:
+    """One pass of :func:`preimage_push` on ``out`` ``(T, N, 3)``, in place, from the rigid
+    guesses ``guess`` ``(M, 3)`` of the vertices ``(frame, vertex)`` ``(M,)``: each vertex
+    with a preimage less than ``epsilon`` outside the canonical body moves out of the deepest
+    one. Returns ``(T, N)`` bool, the vertices it moved."""
+    moved = torch.zeros(out.shape[:2], dtype=torch.bool)
     if frame.numel() == 0:
-        return
-    frames = transforms[frame]  # (M, J, 4, 4)
-    x, weights, kept = _refine(guess, target, frames, mine, fields, betas, epsilon)
+        return moved
+    target, mine = out[frame, vertex], own[frame, vertex]
+    x, weights, kept = _refine(guess, target, skin, frame, mine, fields, betas, epsilon)
     if kept.numel() == 0:
-        return
+        return moved
     distance, normal = sdf_and_normal(fields.sdf, x)
-    hit = distance < epsilon
-    if not bool(hit.any()):
-        return
+    hit = torch.nonzero(distance < epsilon)[:, 0]
+    if hit.numel() == 0:
+        return moved
+    # The deepest preimage of each vertex: sorted deepest first, the first of each vertex.
+    hit = hit[torch.argsort(distance[hit])]
+    key = frame[kept[hit]] * out.shape[1] + vertex[kept[hit]]
+    unique, inverse = torch.unique(key, return_inverse=True)
+    first = torch.full_like(unique, hit.numel())
+    first = first.scatter_reduce(0, inverse, torch.arange(hit.numel()), "amin")
+    hit = hit[first]
     chosen = kept[hit]
     frame, vertex = frame[chosen], vertex[chosen]
-    blend = torch.einsum("mj,mjcd->mcd", weights[hit], frames[chosen, :, :3, :3])
-    move = torch.einsum("mcd,md->mc", blend, normal[hit])
+    rotation = _blend(weights[hit], frame, skin)[:, :, :3]  # (F, 3, 3)
+    move = torch.einsum("mcd,md->mc", rotation, normal[hit])
     out[frame, vertex] += (epsilon - distance[hit])[:, None] * move
     moved[frame, vertex] = True
+    return moved
+
+
+def _blend(weights: torch.Tensor, frame: torch.Tensor, skin: torch.Tensor) -> torch.Tensor:
+    """The blended skinning transforms ``(M, 3, 4)`` Σ_j w_j T_j of weights ``(M, J)`` in the
+    frames ``frame`` ``(M,)``; ``skin`` ``(T·J, 12)`` holds the transforms' top rows. A sparse
+    product: each row of weights picks its frame's J rows, with no ``(M, J, 12)`` gather."""
+    m, joints = weights.shape
+    rows = torch.arange(0, m * joints + 1, joints)
+    columns = (frame[:, None] * joints + torch.arange(joints)).reshape(-1)
+    with warnings.catch_warnings():  # torch calls its sparse CSR tensors beta
+        warnings.simplefilter("ignore", UserWarning)
+        table = torch.sparse_csr_tensor(
+            rows, columns, weights.reshape(-1), (m, skin.shape[0]), check_invariants=False
+        )
+    return (table @ skin).view(m, 3, 4)
 
 
 def _refine(
     x: torch.Tensor,
     target: torch.Tensor,
-    frames: torch.Tensor,
+    skin: torch.Tensor,
+    frame: torch.Tensor,
     own: torch.Tensor,
     fields: BodyFields,
     betas: torch.Tensor,
@@ -176,32 +229,33 @@ def _refine(
     """The canonical preimages that :data:`PREIMAGE_STEPS` fixed-point steps of inverse
     skinning (a step that turns back on the one before shortened by :data:`DAMPING`) find from
     the rigid guesses ``x`` ``(M, 3)`` (shaped rest frame) of the posed points ``target``
-    ``(M, 3)`` (skinning transforms ``frames`` ``(M, J, 4, 4)``; ``own`` ``(M, 3)`` the points'
-    own preimages, shaped): those ``(F, 3)`` that skin back to within
+    ``(M, 3)`` (in the frames ``frame`` ``(M,)`` of ``skin``, see :func:`_blend`; ``own``
+    ``(M, 3)`` the points' own preimages, shaped): those ``(F, 3)`` that skin back to within
     :data:`PREIMAGE_TOLERANCE` and may lie less than ``epsilon`` outside the canonical body,
     their skinning weights ``(F, J)`` and their indices ``(F,)`` into the M guesses.
 
-    After the first step a candidate is dropped where it comes within :data:`OWN_RADIUS` of its
+    After each step a candidate is dropped where it has come within :data:`OWN_RADIUS` of its
     own preimage (the steps converge on that one) or where its SDF is more than ``epsilon``
-    even :data:`STEP_BOUND` times its next step closer (the SDF is 1-Lipschitz, and the
-    fixed point is about that far off), so later steps look up the fields for a few only.
+    even :data:`STEP_BOUND` times that step closer (the SDF is 1-Lipschitz, and the fixed
+    point is about that far off), so later steps look up the fields for a few only.
     """
-    x = x - fields.shaped(x, betas)[1]  # the rigid guess is in the shaped rest frame
+    x = x - fields.shape_offsets(x, betas)  # the rigid guess is in the shaped rest frame
     kept, last = torch.arange(x.shape[0]), torch.zeros_like(x)
     for step in range(PREIMAGE_STEPS + 1):
         weights, offset = fields.shaped(x, betas)
-        delta = inverse_skin(target[:, None], weights[:, None], frames)[:, 0] - offset - x
-        shift = delta.norm(dim=-1)
+        blended = _blend(weights, frame, skin)
+        rest = torch.linalg.solve(blended[..., :3], target - blended[..., 3])
+        delta = rest - offset - x
         if step == PREIMAGE_STEPS:
             break
-        if step > 0:
-            stay = (x + offset - own).norm(dim=-1) > OWN_RADIUS
-            stay &= fields.sdf(x) - STEP_BOUND * shift < epsilon
-            kept, x, delta, last = kept[stay], x[stay], delta[stay], last[stay]
-            target, frames, own = target[stay], frames[stay], own[stay]
-            if kept.numel() == 0:
-                return x, weights[:0], kept
-        x = x + torch.where((delta * last).sum(-1, keepdim=True) < 0, DAMPING, 1.0) * delta
-        last = delta
-    found = shift < PREIMAGE_TOLERANCE
+        step_ = torch.where((delta * last).sum(-1, keepdim=True) < 0, DAMPING, 1.0) * delta
+        x, last = x + step_, delta
+        # The offset at the step's start stands in for the one where it ends.
+        stay = (x + offset - own).norm(dim=-1) > OWN_RADIUS
+        stay &= fields.sdf(x) - STEP_BOUND * step_.norm(dim=-1) < epsilon
+        kept, x, last = kept[stay], x[stay], last[stay]
+        target, frame, own = target[stay], frame[stay], own[stay]
+        if kept.numel() == 0:
+            return x, weights[:0], kept
+    found = delta.norm(dim=-1) < PREIMAGE_TOLERANCE
     return x[found], weights[found], kept[found]

@@ -164,9 +164,15 @@ class BodyFields(torch.nn.Module):
         lead = points.shape[:-1]
         flat = points.reshape(-1, 3).to(self.fields_coarse.origin)
         (raw,) = self._fields(flat, ("weights",))
+        return raw.reshape(*lead, -1), self.shape_offsets(flat, betas).reshape(*lead, 3)
+
+    def shape_offsets(self, points: torch.Tensor, betas: torch.Tensor) -> torch.Tensor:
+        """The shape offsets B̃s(X)·β ``(..., N, 3)`` (m) of :meth:`shaped` alone, at points
+        ``(..., N, 3)`` (the weights cost more than half of a lookup of both)."""
+        flat = points.reshape(-1, 3).to(self.fields_coarse.origin)
         levels, coarse = self._offset_grids(betas)
         (offsets,) = self._cascade(flat, ("offset",), levels, coarse)
-        return raw.reshape(*lead, -1), offsets.reshape(*lead, 3)
+        return offsets.reshape(points.shape)
 
     def _offset_grids(self, betas: torch.Tensor) -> tuple[list[SparseGrid], DenseGrid]:
         """The levels holding ``shape_dirs`` and the dense grid with one channel group,

@@ -295,22 +295,22 @@ class LearnedMethod:
                     first_order = tangent[0] if tangent is not None else None
                     lap("fields")
                     art = garment_model.articulation(betas, pose[s:e], trans[s:e])
-                    parts = []
+                    parts, unposed = [], []
                     # POSE_FRAMES at a time bounds the (t, N, channels) temporaries.
                     for a in range(0, e - s, POSE_FRAMES):
                         b = slice(a, a + POSE_FRAMES)
                         posed = garment_model.pose(x[b], art[b], first_order)
-                        vertices = posed.vertices
-                        if boxes is not None:
-                            lap("posing")
-                            vertices = preimage_push(
-                                vertices, posed.unposed, art[b].transforms, self._fields, betas,
-                                boxes, PUSH_OUT_EPS,
-                            )  # fmt: skip
-                            lap("preimage")
-                        parts.append(vertices)
-                    points = torch.cat(parts).numpy()
+                        parts.append(posed.vertices)
+                        unposed.append(posed.unposed)
+                    vertices = torch.cat(parts)
                     lap("posing")
+                    if boxes is not None:  # the whole chunk at once: fewer, larger steps
+                        vertices = preimage_push(
+                            vertices, torch.cat(unposed), art.transforms, self._fields, betas,
+                            boxes, PUSH_OUT_EPS,
+                        )  # fmt: skip
+                        lap("preimage")
+                    points = vertices.numpy()
                 if carried:
                     points = carry_to_lod(points, template.name, model.lod, template.lod)
                     lap("carry")
