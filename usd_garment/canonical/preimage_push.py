@@ -244,7 +244,9 @@ def _refine(
     for step in range(PREIMAGE_STEPS + 1):
         weights, offset = fields.shaped(x, betas)
         blended = _blend(weights, frame, skin)
-        rest = torch.linalg.solve(blended[..., :3], target - blended[..., 3])
+        # b as (M, 3, 1): with (M, 3) the solution comes back column-major, and every
+        # reduction over its rows after it runs tens of times slower.
+        rest = torch.linalg.solve(blended[..., :3], (target - blended[..., 3])[..., None])[..., 0]
         delta = rest - offset - x
         if step == PREIMAGE_STEPS:
             break

@@ -11,6 +11,8 @@ Shapes: M query points, C channels; positions in metres.
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import torch
 from scipy import ndimage
@@ -27,13 +29,16 @@ def _cell_and_weights(
     cell = torch.minimum(g.detach().floor(), upper - 1)
     t = (g - cell).t()  # (3, M) in [0, 1]
     ends = (1 - t, t)
-    corners = [(dx, dy, dz) for dx in (0, 1) for dy in (0, 1) for dz in (0, 1)]
-    # Each corner from (M,) rows: products broadcast over (M, 2, 2, 2) are several times slower.
-    w = torch.stack([ends[dx][0] * ends[dy][1] * ends[dz][2] for dx, dy, dz in corners], dim=1)
     c = cell.long()
     base = (c[:, 0] * shape[1] + c[:, 1]) * shape[2] + c[:, 2]
-    steps = [(dx * shape[1] + dy) * shape[2] + dz for dx, dy, dz in corners]
-    return torch.stack([base + k for k in steps], dim=1), w
+    # Column by column from (M,) rows: products broadcast over (M, 2, 2, 2), or a stack of the
+    # columns, take several times longer.
+    w = points.new_empty(len(points), 8)
+    flat = base.new_empty(len(points), 8)
+    for k, (dx, dy, dz) in enumerate(itertools.product((0, 1), repeat=3)):
+        w[:, k] = ends[dx][0] * ends[dy][1] * ends[dz][2]
+        flat[:, k] = base + ((dx * shape[1] + dy) * shape[2] + dz)
+    return flat, w
 
 
 def _interpolate(w: torch.Tensor, table: torch.Tensor, rows: torch.Tensor) -> torch.Tensor:
