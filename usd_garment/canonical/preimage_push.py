@@ -51,7 +51,9 @@ PREIMAGE_TOLERANCE = 1e-3
 #: Passes; a later pass revisits only the vertices the one before moved (a vertex inside two
 #: parts moves out of the deeper first, and a move out of one part can end inside another, where
 #: the spine's parts meet). A third pass took 0.003–0.019 points more of the validation inputs'
-#: vertices out, for about a tenth more time (docs/learning.md, stop 47).
+#: vertices out, for about a tenth more time; with the arms as captured (CMU 131_02), three passes
+#: and a step bound of 2 left 0.457 % inside elsewhere against this setting's 0.579 %
+#: (docs/learning.md, stop 47).
 PASSES = 2
 #: Frames whose rigid guesses (``frames · N · J · 3`` floats) are made at once.
 GUESS_FRAMES = 8
