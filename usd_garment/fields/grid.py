@@ -31,14 +31,15 @@ def _cell_and_weights(
     ends = (1 - t, t)
     c = cell.long()
     base = (c[:, 0] * shape[1] + c[:, 1]) * shape[2] + c[:, 2]
-    # Column by column from (M,) rows: products broadcast over (M, 2, 2, 2), or a stack of the
-    # columns, take several times longer.
+    corners = list(itertools.product((0, 1), repeat=3))
+    # The weights column by column from (M,) rows (products broadcast over (M, 2, 2, 2), or a
+    # stack of the columns, take several times longer); the indices by one broadcast sum (their
+    # column writes took three times longer on 229k points).
     w = points.new_empty(len(points), 8)
-    flat = base.new_empty(len(points), 8)
-    for k, (dx, dy, dz) in enumerate(itertools.product((0, 1), repeat=3)):
+    for k, (dx, dy, dz) in enumerate(corners):
         w[:, k] = ends[dx][0] * ends[dy][1] * ends[dz][2]
-        flat[:, k] = base + ((dx * shape[1] + dy) * shape[2] + dz)
-    return flat, w
+    step = torch.tensor([(dx * shape[1] + dy) * shape[2] + dz for dx, dy, dz in corners])
+    return base[:, None] + step.to(base.device), w
 
 
 def _interpolate(w: torch.Tensor, table: torch.Tensor, rows: torch.Tensor) -> torch.Tensor:
