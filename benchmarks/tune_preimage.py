@@ -122,15 +122,15 @@ def main() -> None:
     surface = BodySurface(body.faces.numpy(), body.num_vertices)
     fields = load_body_fields()
     print(f"torch {torch.__version__}, {torch.get_num_threads()} threads")
-    accuracy = {}
+    accuracy = []  # (layer, recorded push inputs, posed body, its search structures)
     for layer in args.layer:
         start = time.perf_counter()
         motion, _ = read_smpl_motion(layer, body)
         vertices = posed_body_vertices(body, motion)
-        accuracy[layer.name] = (record(layer), vertices, BodyFrames(vertices, surface))
+        accuracy.append((layer, record(layer), vertices, BodyFrames(vertices, surface)))
         print(f"recorded {layer} ({motion.num_frames} frames) in "
               f"{time.perf_counter() - start:.1f} s")  # fmt: skip
-    timed = record(args.speed_layer) if args.speed_layer else accuracy[args.layer[0].name][0]
+    timed = record(args.speed_layer) if args.speed_layer else accuracy[0][1]
     frames = sum(len(c.points) for c in timed)
     best = [float("inf")] * len(settings)
     for _ in range(args.repeat):  # settings interleaved, so that drifts in speed hit all alike
@@ -139,12 +139,12 @@ def main() -> None:
                 start = time.perf_counter()
                 push(timed, fields)
                 best[i] = min(best[i], time.perf_counter() - start)
-    print(f"{'passes, bound, steps':24s}" + "".join(f"{name[:24]:>26s}" for name in accuracy)
+    print(f"{'passes, bound, steps':24s}" + "".join(f"{row[0].name[:24]:>26s}" for row in accuracy)
           + "   push ms/frame (x first)")  # fmt: skip
     for i, values in enumerate(settings):
         cells = []
         with setting(values):
-            for calls, vertices, structures in accuracy.values():
+            for _, calls, vertices, structures in accuracy:
                 query = signed_distance(push(calls, fields), vertices, surface, frames=structures)
                 cells.append(
                     f"{100 * query.forced.mean():.3f} / {100 * query.elsewhere.mean():.3f} %"

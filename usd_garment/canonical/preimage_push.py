@@ -57,8 +57,9 @@ PREIMAGE_TOLERANCE = 1e-3
 #: parts moves out of the deeper first, and a move out of one part can end inside another, where
 #: the spine's parts meet). In stop 48's runs with the arms as captured (CMU 131_02), a third
 #: pass took vertices out of the trunk where the arm is pressed into it (forced 0.90 → 0.74 %)
-#: but left more inside elsewhere (0.317 → 0.341 % with 12 steps and a bound of 4), and on the
-#: validation inputs it is worth less than 0.005 points (docs/learning.md, stop 48).
+#: but left more inside elsewhere (0.317 → 0.341 % with 12 steps and a bound of 4); with the
+#: shoulders opened it took 0.002 points more out (stop 47, 8 steps and a bound of 2, on the
+#: validation split's inputs: 0.003–0.019; docs/learning.md).
 PASSES = 2
 #: Frames whose rigid guesses (``frames · N · J · 3`` floats) are made at once.
 GUESS_FRAMES = 8

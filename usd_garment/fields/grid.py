@@ -38,8 +38,8 @@ def _cell_and_weights(
     w = points.new_empty(len(points), 8)
     for k, (dx, dy, dz) in enumerate(corners):
         w[:, k] = ends[dx][0] * ends[dy][1] * ends[dz][2]
-    step = torch.tensor([(dx * shape[1] + dy) * shape[2] + dz for dx, dy, dz in corners])
-    return base[:, None] + step.to(base.device), w
+    step = [(dx * shape[1] + dy) * shape[2] + dz for dx, dy, dz in corners]
+    return base[:, None] + torch.tensor(step, device=base.device), w
 
 
 def _interpolate(w: torch.Tensor, table: torch.Tensor, rows: torch.Tensor) -> torch.Tensor:
