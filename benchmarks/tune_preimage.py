@@ -1,5 +1,7 @@
 """Tuning bench of ``learned+preimage``'s push (``usd_garment/canonical/preimage_push.py``): for
-each setting of its constants (passes, step bound, fixed-point steps), the inside share of each
+each setting of its constants (passes, step bound, fixed-point steps) and, optionally, of the
+margin the pushed vertices end at outside the canonical body (mm; default: the method's
+``PUSH_OUT_EPS``), the inside share of each
 ``--layer`` (forced / elsewhere, winding number against the posed body, as ``usd-garment eval``
 counts it) and the push's time per frame on ``--speed-layer`` (default: the first layer), the
 fastest of ``--repeat`` runs, with its ratio to the first setting's in the same run.
@@ -12,7 +14,7 @@ later rows ran with earlier rows' changes). The first setting is the shipped one
 runs (``docs/learning.md``, "The preimage search with the arms as captured").
 
 Run: ``python benchmarks/tune_preimage.py --layer A.usdc [--layer B.usdc ...]
-[--speed-layer W.usdc] [--setting PASSES,BOUND,STEPS ...] [--repeat 3]``
+[--speed-layer W.usdc] [--setting PASSES,BOUND,STEPS[,MARGIN_MM] ...] [--repeat 3]``
 """
 
 from __future__ import annotations
@@ -94,18 +96,26 @@ def setting(values: tuple[float, ...]) -> Iterator[None]:
             setattr(search, name, value)
 
 
-def push(calls: list[PushInputs], fields: BodyFields) -> np.ndarray:
-    """The pushed garments ``(T, N, 3)`` of every chunk, with the module's current constants."""
+def push(calls: list[PushInputs], fields: BodyFields, margin: float | None = None) -> np.ndarray:
+    """The pushed garments ``(T, N, 3)`` of every chunk, with the module's current constants,
+    ending ``margin`` (m; None: the recorded one) outside the canonical body."""
     return torch.cat([
-        search.preimage_push(c.points, c.own, c.transforms, fields, c.betas, c.boxes, c.epsilon)
+        search.preimage_push(c.points, c.own, c.transforms, fields, c.betas, c.boxes,
+                             c.epsilon if margin is None else margin)
         for c in calls
     ]).numpy()  # fmt: skip
 
 
+def split(values: tuple[float, ...]) -> tuple[tuple[float, ...], float | None]:
+    """A setting's constants and its margin (m), None where it gives none."""
+    constants = values[: len(CONSTANTS)]
+    return constants, values[len(CONSTANTS)] * 1e-3 if len(values) > len(CONSTANTS) else None
+
+
 def parse_setting(text: str) -> tuple[float, ...]:
     values = tuple(float(v) for v in text.split(","))
-    if len(values) != len(CONSTANTS):
-        raise argparse.ArgumentTypeError(f"{text!r}: give {','.join(CONSTANTS)}")
+    if len(values) not in (len(CONSTANTS), len(CONSTANTS) + 1):
+        raise argparse.ArgumentTypeError(f"{text!r}: give {','.join(CONSTANTS)}[,MARGIN_MM]")
     return values
 
 
@@ -114,7 +124,7 @@ def main() -> None:
     parser.add_argument("--layer", type=Path, action="append", required=True)
     parser.add_argument("--speed-layer", type=Path)
     parser.add_argument("--setting", type=parse_setting, action="append", default=[],
-                        metavar=",".join(CONSTANTS))  # fmt: skip
+                        metavar=",".join(CONSTANTS) + "[,MARGIN_MM]")  # fmt: skip
     parser.add_argument("--repeat", type=int, default=3, help="timed runs; the fastest counts")
     args = parser.parse_args()
     settings = args.setting or [tuple(float(getattr(search, n)) for n in CONSTANTS)]
@@ -135,22 +145,25 @@ def main() -> None:
     best = [float("inf")] * len(settings)
     for _ in range(args.repeat):  # settings interleaved, so that drifts in speed hit all alike
         for i, values in enumerate(settings):
-            with setting(values):
+            constants, margin = split(values)
+            with setting(constants):
                 start = time.perf_counter()
-                push(timed, fields)
+                push(timed, fields, margin)
                 best[i] = min(best[i], time.perf_counter() - start)
-    print(f"{'passes, bound, steps':24s}" + "".join(f"{row[0].name[:24]:>26s}" for row in accuracy)
-          + "   push ms/frame (x first)")  # fmt: skip
+    names = "".join(f"{row[0].name[:24]:>26s}" for row in accuracy)
+    print(f"{'passes, bound, steps[, mm]':26s}{names}   push ms/frame (x first)")
     for i, values in enumerate(settings):
         cells = []
-        with setting(values):
+        constants, margin = split(values)
+        with setting(constants):
             for _, calls, vertices, structures in accuracy:
-                query = signed_distance(push(calls, fields), vertices, surface, frames=structures)
+                pushed = push(calls, fields, margin)
+                query = signed_distance(pushed, vertices, surface, frames=structures)
                 cells.append(
                     f"{100 * query.forced.mean():.3f} / {100 * query.elsewhere.mean():.3f} %"
                 )
         label = ", ".join(f"{v:g}" for v in values)
-        print(f"{label:24s}" + "".join(f"{c:>26s}" for c in cells)
+        print(f"{label:26s}" + "".join(f"{c:>26s}" for c in cells)
               + f"   {1e3 * best[i] / frames:.2f} ({best[i] / best[0]:.2f})")  # fmt: skip
 
 
