@@ -13,7 +13,9 @@ diffused fields (as the projection unposes garments; a step that turns back on t
 shortened). Guesses that converge on the vertex's own preimage, or cannot end near the canonical
 body, are dropped after each step. A refined guess that skins back to p is a preimage; where it
 lies less than ε outside the canonical body (the baked SDF), p moves by the skinned normal until
-it is ε outside (the deepest such preimage of a vertex first; a later pass takes the others).
+it is ε outside (the deepest such preimage of a vertex first; a later pass takes the others,
+at half the distance of the pass before: in a crease, out of one part and back out of the other,
+the vertex ends between the two).
 
 Shapes: T frames, N garment vertices, J = 24 joints, M candidate (frame, vertex, joint) guesses,
 K = 10 shape coefficients. Units: metres.
@@ -54,13 +56,14 @@ STEP_BOUND = 4.0
 #: A refined guess is a preimage where it skins to within this (m) of the vertex.
 PREIMAGE_TOLERANCE = 1e-3
 #: Passes; a later pass revisits only the vertices the one before moved (a vertex inside two
-#: parts moves out of the deeper first, and a move out of one part can end inside another, where
-#: the spine's parts meet). In stop 48's runs with the arms as captured (CMU 131_02), a third
-#: pass took vertices out of the trunk where the arm is pressed into it (forced 0.90 → 0.74 %)
-#: but left more inside elsewhere (0.317 → 0.341 % with 12 steps and a bound of 4); with the
-#: shoulders opened it took 0.002 points more out (stop 47, 8 steps and a bound of 2, on the
-#: validation split's inputs: 0.003–0.019; docs/learning.md).
-PASSES = 2
+#: parts moves out of the deeper first, and a move out of one part can end inside another: where
+#: the spine's parts meet, or out of the trunk into an arm pressed against it). Pass k moves its
+#: vertices to epsilon / 2**k outside (2, 1, 0.5, 0.25 mm), the crease rule of the exact push-out
+#: (``usd_garment/eval/push_out.py``): a vertex pushed from one part into another ends between
+#: the two. Stop 49 chose four halving passes by a rule fixed before the runs
+#: (docs/learning.md): with the arms as captured (CMU 131_02) 0.207 % inside elsewhere against
+#: stop 48's 0.317 % (two passes at 2 mm), the push 1.16 times as long on the walk.
+PASSES = 4
 #: Frames whose rigid guesses (``frames · N · J · 3`` floats) are made at once.
 GUESS_FRAMES = 8
 
@@ -98,8 +101,9 @@ def preimage_push(
     epsilon: float,
 ) -> torch.Tensor:
     """Posed garments ``(T, N, 3)`` with every vertex that has another preimage less than
-    ``epsilon`` outside the canonical body moved to ``epsilon`` outside (in each of up to
-    :data:`PASSES` passes, out of its deepest such preimage).
+    ``epsilon`` outside the canonical body moved to ``epsilon`` outside, out of its deepest such
+    preimage; each of up to :data:`PASSES` - 1 later passes does the same for the vertices the
+    one before moved, at half the distance of the one before.
 
     Args:
         points: ``(T, N, 3)`` posed garment vertices (m).
@@ -109,15 +113,15 @@ def preimage_push(
         fields: the body's diffused fields and canonical SDF (without pose blendshapes).
         betas: ``(K,)`` the body shape.
         boxes: ``PartBoxes.of(body, betas)``.
-        epsilon: distance (m) outside the body the moved vertices end at.
+        epsilon: distance (m) outside the body the vertices moved in the first pass end at.
     """
     out = points.clone()
     visit = torch.ones(points.shape[:2], dtype=torch.bool)  # (T, N): the vertices this pass sees
     skin = transforms[..., :3, :].reshape(-1, 12)  # (T·J, 12): rows of _blend's product
     with torch.no_grad():
-        for _ in range(PASSES):
+        for k in range(PASSES):
             frame, vertex, guess = _candidates(out, own, transforms, boxes, visit)
-            visit = _push(out, own, skin, frame, vertex, guess, fields, betas, epsilon)
+            visit = _push(out, own, skin, frame, vertex, guess, fields, betas, epsilon / 2**k)
             if not bool(visit.any()):
                 break
     return out
