@@ -62,7 +62,8 @@ PREIMAGE_TOLERANCE = 1e-3
 #: (``usd_garment/eval/push_out.py``): a vertex pushed from one part into another ends between
 #: the two. Stop 49 chose four halving passes by a rule fixed before the runs
 #: (docs/learning.md): with the arms as captured (CMU 131_02) 0.207 % inside elsewhere against
-#: stop 48's 0.317 % (two passes at 2 mm), the push 1.16 times as long on the walk.
+#: stop 48's 0.317 % (two passes at 2 mm), the push 1.16 times as long on the walk; more stays,
+#: shallow, where fast runs swing the arms against the trunk (test split and walk 0.021 → 0.027 %).
 PASSES = 4
 #: Frames whose rigid guesses (``frames · N · J · 3`` floats) are made at once.
 GUESS_FRAMES = 8
