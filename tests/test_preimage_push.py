@@ -74,6 +74,30 @@ def test_a_point_carried_into_the_chest_is_pushed_out(
     assert 1e-3 < after[0] < 4e-3, after
     torch.testing.assert_close(pushed[0, 1:], points[0, 1:], rtol=0, atol=0)
 
+    # The crease rule: in pass 1, a move against the vertex's move before (here: into the
+    # chest) puts it in a crease and ends half as far out (1 mm); with no move before, 2 mm.
+    skin = art.transforms[..., :3, :].reshape(-1, 12)
+    one = points[:, :1].clone()
+    ends = []
+    for before_move in (torch.zeros(3), torch.tensor(-normals[chest], dtype=torch.float32)):
+        crease = preimage._Crease(
+            before_move.expand(1, 1, 3).clone(), torch.zeros(1, 1, dtype=torch.bool)
+        )
+        out = one.clone()
+        frame, vertex, guess = preimage._candidates(
+            out,
+            own[:, :1],
+            art.transforms,
+            PartBoxes.of(body, betas),
+            torch.ones(1, 1, dtype=torch.bool),
+        )
+        preimage._push(
+            out, own[:, :1], skin, frame, vertex, guess, fields, betas, PUSH_OUT_EPS, 1, crease
+        )
+        ends.append(signed_distance(out.numpy(), posed[None], surface).distance[0, 0])
+        assert bool(crease.inside[0, 0]) == bool(before_move.any())
+    assert 0.7e-3 < ends[0] - ends[1] < 1.1e-3, ends
+
 
 def test_part_boxes_hold_their_parts(body_model: BodyModel) -> None:
     """Each joint's box holds the shaped rest vertices whose largest weight is that joint's;

@@ -13,9 +13,9 @@ diffused fields (as the projection unposes garments; a step that turns back on t
 shortened). Guesses that converge on the vertex's own preimage, or cannot end near the canonical
 body, are dropped after each step. A refined guess that skins back to p is a preimage; where it
 lies less than ε outside the canonical body (the baked SDF), p moves by the skinned normal until
-it is ε outside (the deepest such preimage of a vertex first; a later pass takes the others,
-at half the distance of the pass before: in a crease, out of one part and back out of the other,
-the vertex ends between the two).
+it is ε outside (the deepest such preimage of a vertex first; a later pass takes the others).
+A vertex that a pass moves back against its move before is in a crease (out of one part and
+back out of the other): from then on pass k moves it to ε / 2^k, and it ends between the two.
 
 Shapes: T frames, N garment vertices, J = 24 joints, M candidate (frame, vertex, joint) guesses,
 K = 10 shape coefficients. Units: metres.
@@ -57,13 +57,15 @@ STEP_BOUND = 4.0
 PREIMAGE_TOLERANCE = 1e-3
 #: Passes; a later pass revisits only the vertices the one before moved (a vertex inside two
 #: parts moves out of the deeper first, and a move out of one part can end inside another: where
-#: the spine's parts meet, or out of the trunk into an arm pressed against it). Pass k moves its
-#: vertices to epsilon / 2**k outside (2, 1, 0.5, 0.25 mm), the crease rule of the exact push-out
-#: (``usd_garment/eval/push_out.py``): a vertex pushed from one part into another ends between
-#: the two. Stop 49 chose four halving passes by a rule fixed before the runs
-#: (docs/learning.md): with the arms as captured (CMU 131_02) 0.207 % inside elsewhere against
-#: stop 48's 0.317 % (two passes at 2 mm), the push 1.16 times as long on the walk; more stays,
-#: shallow, where fast runs swing the arms against the trunk (test split and walk 0.021 → 0.027 %).
+#: the spine's parts meet, or out of the trunk into an arm pressed against it). A vertex moved
+#: against its move before is in a crease, and pass k moves it to (and only looks for
+#: preimages less than) epsilon / 2**k outside: the crease rule of the exact push-out
+#: (``usd_garment/eval/push_out.py``), so that it ends between the two parts; any other vertex
+#: is pushed to epsilon in every pass, which also corrects a first move that fell short where
+#: the skinned normal is off (the fast runs). Stop 50 chose this by a rule fixed before the runs
+#: (docs/learning.md): on two validation runs 0.070 % inside elsewhere against stop 49's 0.180 %
+#: (halving every vertex's distance, 2 / 1 / 0.5 / 0.25 mm) and stop 48's 0.075 % (2 mm in two
+#: passes); with the arms as captured (CMU 131_02) 0.215 % against 0.207 % and 0.317 %.
 PASSES = 4
 #: Frames whose rigid guesses (``frames · N · J · 3`` floats) are made at once.
 GUESS_FRAMES = 8
@@ -92,6 +94,16 @@ class PartBoxes:
         return cls(lower - margin, upper + margin)
 
 
+@dataclass(frozen=True)
+class _Crease:
+    """What :func:`_push` keeps of each vertex between passes: its last move's direction
+    ``(T, N, 3)`` (zero before its first) and whether it is in a crease ``(T, N)`` (some pass
+    moved it against its move before)."""
+
+    move: torch.Tensor
+    inside: torch.Tensor
+
+
 def preimage_push(
     points: torch.Tensor,
     own: torch.Tensor,
@@ -104,7 +116,8 @@ def preimage_push(
     """Posed garments ``(T, N, 3)`` with every vertex that has another preimage less than
     ``epsilon`` outside the canonical body moved to ``epsilon`` outside, out of its deepest such
     preimage; each of up to :data:`PASSES` - 1 later passes does the same for the vertices the
-    one before moved, at half the distance of the one before.
+    one before moved, pass k at ``epsilon / 2**k`` for a vertex in a crease (see
+    :func:`_push`).
 
     Args:
         points: ``(T, N, 3)`` posed garment vertices (m).
@@ -114,15 +127,16 @@ def preimage_push(
         fields: the body's diffused fields and canonical SDF (without pose blendshapes).
         betas: ``(K,)`` the body shape.
         boxes: ``PartBoxes.of(body, betas)``.
-        epsilon: distance (m) outside the body the vertices moved in the first pass end at.
+        epsilon: distance (m) outside the body the moved vertices end at (outside a crease).
     """
     out = points.clone()
     visit = torch.ones(points.shape[:2], dtype=torch.bool)  # (T, N): the vertices this pass sees
     skin = transforms[..., :3, :].reshape(-1, 12)  # (T·J, 12): rows of _blend's product
+    state = _Crease(torch.zeros_like(points), torch.zeros(points.shape[:2], dtype=torch.bool))
     with torch.no_grad():
         for k in range(PASSES):
             frame, vertex, guess = _candidates(out, own, transforms, boxes, visit)
-            visit = _push(out, own, skin, frame, vertex, guess, fields, betas, epsilon / 2**k)
+            visit = _push(out, own, skin, frame, vertex, guess, fields, betas, epsilon, k, state)
             if not bool(visit.any()):
                 break
     return out
@@ -183,11 +197,16 @@ def _push(
     fields: BodyFields,
     betas: torch.Tensor,
     epsilon: float,
+    k: int,
+    crease: _Crease,
 ) -> torch.Tensor:
-    """One pass of :func:`preimage_push` on ``out`` ``(T, N, 3)``, in place, from the rigid
+    """Pass ``k`` of :func:`preimage_push` on ``out`` ``(T, N, 3)``, in place, from the rigid
     guesses ``guess`` ``(M, 3)`` of the vertices ``(frame, vertex)`` ``(M,)``: each vertex
-    with a preimage less than ``epsilon`` outside the canonical body moves out of the deepest
-    one. Returns ``(T, N)`` bool, the vertices it moved."""
+    with a preimage less than ``epsilon`` outside the canonical body (``epsilon / 2**k`` for a
+    vertex in a crease) moves out of the deepest one, to that distance outside. A move against
+    the vertex's move before puts it in the crease (``crease``, updated); a vertex whose deepest
+    preimage already lies that far outside does not move. Returns ``(T, N)`` bool, the vertices
+    it moved."""
     moved = torch.zeros(out.shape[:2], dtype=torch.bool)
     if frame.numel() == 0:
         return moved
@@ -196,7 +215,9 @@ def _push(
     if kept.numel() == 0:
         return moved
     distance, normal = sdf_and_normal(fields.sdf, x)
-    hit = torch.nonzero(distance < epsilon)[:, 0]
+    half = epsilon / 2**k
+    limit = torch.where(crease.inside[frame[kept], vertex[kept]], half, epsilon)
+    hit = torch.nonzero(distance < limit)[:, 0]
     if hit.numel() == 0:
         return moved
     # The deepest preimage of each vertex: sorted deepest first, the first of each vertex.
@@ -210,7 +231,13 @@ def _push(
     frame, vertex = frame[chosen], vertex[chosen]
     rotation = _blend(weights[hit], frame, skin)[:, :, :3]  # (F, 3, 3)
     move = torch.einsum("mcd,md->mc", rotation, normal[hit])
-    out[frame, vertex] += (epsilon - distance[hit])[:, None] * move
+    inside = crease.inside[frame, vertex] | ((move * crease.move[frame, vertex]).sum(-1) < 0)
+    crease.inside[frame, vertex] = inside
+    target = torch.where(inside, half, epsilon)
+    go = distance[hit] < target
+    frame, vertex, move = frame[go], vertex[go], move[go]
+    out[frame, vertex] += (target[go] - distance[hit][go])[:, None] * move
+    crease.move[frame, vertex] = move
     moved[frame, vertex] = True
     return moved
 
