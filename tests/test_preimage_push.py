@@ -64,9 +64,8 @@ def test_a_point_carried_into_the_chest_is_pushed_out(
     g = art.transforms[0, 9]  # the upper spine's bone: the chest's own preimage in its rest frame
     own = (points - g[:3, 3]) @ g[:3, :3]
     own[0, :2, 0] += 0.3  # the first two have their own preimage 30 cm away
-    pushed = preimage_push(
-        points, own, art.transforms, fields, betas, PartBoxes.of(body, betas), PUSH_OUT_EPS
-    )
+    boxes = PartBoxes.of(body, betas)
+    pushed = preimage_push(points, own, art.transforms, fields, betas, boxes, PUSH_OUT_EPS)
     surface = BodySurface(body.faces.numpy(), body.num_vertices)
     before = signed_distance(points.numpy(), posed[None], surface).distance[0]
     after = signed_distance(pushed.numpy(), posed[None], surface).distance[0]
@@ -88,14 +87,14 @@ def test_a_point_carried_into_the_chest_is_pushed_out(
             out,
             own[:, :1],
             art.transforms,
-            PartBoxes.of(body, betas),
+            boxes,
             torch.ones(1, 1, dtype=torch.bool),
         )
         preimage._push(
             out, own[:, :1], skin, frame, vertex, guess, fields, betas, PUSH_OUT_EPS, 1, crease
         )
         ends.append(signed_distance(out.numpy(), posed[None], surface).distance[0, 0])
-        assert bool(crease.inside[0, 0]) == bool(before_move.any())
+        assert bool(crease.creased[0, 0]) == bool(before_move.any())
     assert 0.7e-3 < ends[0] - ends[1] < 1.1e-3, ends
 
 

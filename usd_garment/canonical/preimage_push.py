@@ -101,7 +101,7 @@ class _Crease:
     moved it against its move before)."""
 
     move: torch.Tensor
-    inside: torch.Tensor
+    creased: torch.Tensor
 
 
 def preimage_push(
@@ -216,7 +216,7 @@ def _push(
         return moved
     distance, normal = sdf_and_normal(fields.sdf, x)
     half = epsilon / 2**k
-    limit = torch.where(crease.inside[frame[kept], vertex[kept]], half, epsilon)
+    limit = torch.where(crease.creased[frame[kept], vertex[kept]], half, epsilon)
     hit = torch.nonzero(distance < limit)[:, 0]
     if hit.numel() == 0:
         return moved
@@ -231,12 +231,12 @@ def _push(
     frame, vertex = frame[chosen], vertex[chosen]
     rotation = _blend(weights[hit], frame, skin)[:, :, :3]  # (F, 3, 3)
     move = torch.einsum("mcd,md->mc", rotation, normal[hit])
-    inside = crease.inside[frame, vertex] | ((move * crease.move[frame, vertex]).sum(-1) < 0)
-    crease.inside[frame, vertex] = inside
-    target = torch.where(inside, half, epsilon)
-    go = distance[hit] < target
+    creased = crease.creased[frame, vertex] | ((move * crease.move[frame, vertex]).sum(-1) < 0)
+    crease.creased[frame, vertex] = creased
+    target, depth = torch.where(creased, half, epsilon), distance[hit]
+    go = depth < target
     frame, vertex, move = frame[go], vertex[go], move[go]
-    out[frame, vertex] += (target[go] - distance[hit][go])[:, None] * move
+    out[frame, vertex] += (target[go] - depth[go])[:, None] * move
     crease.move[frame, vertex] = move
     moved[frame, vertex] = True
     return moved
