@@ -97,6 +97,20 @@ def test_a_point_carried_into_the_chest_is_pushed_out(
         assert bool(crease.creased[0, 0]) == bool(before_move.any())
     assert 0.7e-3 < ends[0] - ends[1] < 1.1e-3, ends
 
+    # A later pass has no own preimage to leave out (a pass moved the vertex, so its own no
+    # longer skins to it): the third point, whose own preimage lies 5 mm inside the chest,
+    # is pushed out to about ε.
+    out = points[:, 2:].clone()
+    crease = preimage._Crease(torch.zeros(1, 1, 3), torch.zeros(1, 1, dtype=torch.bool))
+    visit = torch.ones(1, 1, dtype=torch.bool)
+    frame, vertex, guess = preimage._candidates(out, None, art.transforms, boxes, visit)
+    moved = preimage._push(
+        out, None, skin, frame, vertex, guess, fields, betas, PUSH_OUT_EPS, 1, crease
+    )
+    assert bool(moved[0, 0])
+    end = signed_distance(out.numpy(), posed[None], surface).distance[0, 0]
+    assert 1e-3 < end < 4e-3, end
+
 
 def test_part_boxes_hold_their_parts(body_model: BodyModel) -> None:
     """Each joint's box holds the shaped rest vertices whose largest weight is that joint's;
@@ -113,10 +127,13 @@ def test_part_boxes_hold_their_parts(body_model: BodyModel) -> None:
     assert nonempty.tolist() == part.unique().tolist()
 
 
-def test_candidates_are_each_joints_rigid_guesses_in_its_box(body_model: BodyModel) -> None:
+@pytest.mark.parametrize("with_own", [True, False])
+def test_candidates_are_each_joints_rigid_guesses_in_its_box(
+    body_model: BodyModel, with_own: bool
+) -> None:
     """The rigid guesses made for every joint at once, a few frames at a time, are those made
-    joint by joint: R_jᵀ(p − t_j) in j's box and away from the vertex's own preimage, for the
-    vertices the pass visits only."""
+    joint by joint: R_jᵀ(p − t_j) in j's box and (in the first pass, where the own preimages
+    are given) away from the vertex's own preimage, for the vertices the pass visits only."""
     gen = torch.Generator().manual_seed(3)
     betas = torch.zeros(10)
     pose = 0.4 * torch.randn(11, 24, 3, generator=gen)
@@ -127,13 +144,15 @@ def test_candidates_are_each_joints_rigid_guesses_in_its_box(body_model: BodyMod
     own = points + 0.05 * torch.randn(points.shape, generator=gen)
     visit = torch.rand(points.shape[:2], generator=gen) < 0.8
     boxes = PartBoxes.of(body_model, betas)
-    frame, vertex, guess = preimage._candidates(points, own, transforms, boxes, visit)
+    mine = own if with_own else None
+    frame, vertex, guess = preimage._candidates(points, mine, transforms, boxes, visit)
     expected = set()
     for j in range(24):
         r, t = transforms[:, j, :3, :3], transforms[:, j, :3, 3]
         g = torch.einsum("fnc,fcd->fnd", points - t[:, None], r)  # (F, N, 3)
         hit = ((g > boxes.lower[j]) & (g < boxes.upper[j])).all(-1) & visit
-        hit &= (g - own).norm(dim=-1) > preimage.OWN_DISTANCE
+        if with_own:
+            hit &= (g - own).norm(dim=-1) > preimage.OWN_DISTANCE
         expected |= {(int(f), int(n), j) for f, n in hit.nonzero().tolist()}
     assert len(expected) > 100
     assert len(frame) == len(expected)
