@@ -7,16 +7,16 @@ itself). A garment vertex has its own preimage, its decoded canonical position X
 ``push_out_canonical`` keeps out of the canonical body. Its other preimages are where posing puts
 it into another part: a sleeve carried into the chest by an arm lowered against the trunk. They
 are searched from every joint j at once: the rigid guess R_jᵀ(p − t_j) (the point in the rest
-frame of j's bone), kept where it falls in the box of j's part of the rest body and away from the
-vertex's own preimage, then refined by fixed-point steps of inverse skinning with the body's
-diffused fields (as the projection unposes garments; a step that turns back on the one before is
-shortened). Guesses that cannot end near the canonical body are dropped after each step, and in
-the first pass those that converge on the vertex's own preimage. A later pass keeps them: once
-a pass has moved a vertex its own preimage no longer skins to it, and the preimage next to it
-may lie inside the canonical body (a move out of one part into the vertex's own). A refined
-guess that skins back to p is a preimage; where it
-lies less than ε outside the canonical body (the baked SDF), p moves by the skinned normal until
-it is ε outside (the deepest such preimage of a vertex first; a later pass takes the others).
+frame of j's bone), kept where it falls in the box of j's part of the rest body (and, in the
+first pass, away from the vertex's own preimage), then refined by fixed-point steps of inverse
+skinning with the body's diffused fields (as the projection unposes garments; a step that turns
+back on the one before is shortened). Guesses that cannot end near the canonical body are
+dropped after each step, and in the first pass those that converge on the vertex's own
+preimage. A later pass keeps them: once a pass has moved a vertex its own preimage no longer
+skins to it, and the preimage next to it may lie inside the canonical body (a move out of one
+part into the vertex's own). A refined guess that skins back to p is a preimage; where it lies
+less than ε outside the canonical body (the baked SDF), p moves by the skinned normal until it
+is ε outside (the deepest such preimage of a vertex first; a later pass takes the others).
 A vertex that a pass moves back against its move before is in a crease (out of one part and
 back out of the other): from then on pass k moves it to ε / 2^k, and it ends between the two.
 
