@@ -76,23 +76,26 @@ def test_a_point_carried_into_the_chest_is_pushed_out(
     # The crease rule: in pass 1, a move against the vertex's move before (here: into the
     # chest) puts it in a crease and ends half as far out (1 mm); with no move before, 2 mm.
     skin = art.transforms[..., :3, :].reshape(-1, 12)
-    one = points[:, :1].clone()
+
+    def pass_1(
+        start: torch.Tensor, mine: torch.Tensor | None, move_before: torch.Tensor
+    ) -> tuple[torch.Tensor, preimage._Crease, torch.Tensor]:
+        """Pass 1 of the push on one point ``start`` ``(1, 1, 3)``: the point after it, the
+        crease state and whether it moved."""
+        crease = preimage._Crease(
+            move_before.expand(1, 1, 3).clone(), torch.zeros(1, 1, dtype=torch.bool)
+        )
+        out = start.clone()
+        visit = torch.ones(1, 1, dtype=torch.bool)
+        frame, vertex, guess = preimage._candidates(out, mine, art.transforms, boxes, visit)
+        moved = preimage._push(
+            out, mine, skin, frame, vertex, guess, fields, betas, PUSH_OUT_EPS, 1, crease
+        )
+        return out, crease, moved
+
     ends = []
     for before_move in (torch.zeros(3), torch.tensor(-normals[chest], dtype=torch.float32)):
-        crease = preimage._Crease(
-            before_move.expand(1, 1, 3).clone(), torch.zeros(1, 1, dtype=torch.bool)
-        )
-        out = one.clone()
-        frame, vertex, guess = preimage._candidates(
-            out,
-            own[:, :1],
-            art.transforms,
-            boxes,
-            torch.ones(1, 1, dtype=torch.bool),
-        )
-        preimage._push(
-            out, own[:, :1], skin, frame, vertex, guess, fields, betas, PUSH_OUT_EPS, 1, crease
-        )
+        out, crease, _ = pass_1(points[:, :1], own[:, :1], before_move)
         ends.append(signed_distance(out.numpy(), posed[None], surface).distance[0, 0])
         assert bool(crease.creased[0, 0]) == bool(before_move.any())
     assert 0.7e-3 < ends[0] - ends[1] < 1.1e-3, ends
@@ -100,13 +103,7 @@ def test_a_point_carried_into_the_chest_is_pushed_out(
     # A later pass has no own preimage to leave out (a pass moved the vertex, so its own no
     # longer skins to it): the third point, whose own preimage lies 5 mm inside the chest,
     # is pushed out to about ε.
-    out = points[:, 2:].clone()
-    crease = preimage._Crease(torch.zeros(1, 1, 3), torch.zeros(1, 1, dtype=torch.bool))
-    visit = torch.ones(1, 1, dtype=torch.bool)
-    frame, vertex, guess = preimage._candidates(out, None, art.transforms, boxes, visit)
-    moved = preimage._push(
-        out, None, skin, frame, vertex, guess, fields, betas, PUSH_OUT_EPS, 1, crease
-    )
+    out, _, moved = pass_1(points[:, 2:], None, torch.zeros(3))
     assert bool(moved[0, 0])
     end = signed_distance(out.numpy(), posed[None], surface).distance[0, 0]
     assert 1e-3 < end < 4e-3, end

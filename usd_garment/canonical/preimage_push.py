@@ -133,7 +133,7 @@ def preimage_push(
     Args:
         points: ``(T, N, 3)`` posed garment vertices (m).
         own: ``(T, N, 3)`` their own preimages in the rest frame, X + B̃s(X)·β
-            (``GarmentOutput.unposed``).
+            (``GarmentOutput.unposed``); the first pass leaves them out of its search.
         transforms: ``(T, J, 4, 4)`` the body's skinning transforms (``Articulation``).
         fields: the body's diffused fields and canonical SDF (without pose blendshapes).
         betas: ``(K,)`` the body shape.
@@ -247,10 +247,10 @@ def _push(
     move = torch.einsum("mcd,md->mc", rotation, normal[hit])
     creased = crease.creased[frame, vertex] | ((move * crease.move[frame, vertex]).sum(-1) < 0)
     crease.creased[frame, vertex] = creased
-    target, depth = torch.where(creased, half, epsilon), distance[hit]
-    go = depth < target
+    goal, depth = torch.where(creased, half, epsilon), distance[hit]  # (F,) m outside
+    go = depth < goal
     frame, vertex, move = frame[go], vertex[go], move[go]
-    out[frame, vertex] += (target[go] - depth[go])[:, None] * move
+    out[frame, vertex] += (goal[go] - depth[go])[:, None] * move
     crease.move[frame, vertex] = move
     moved[frame, vertex] = True
     return moved
