@@ -298,7 +298,9 @@ def _refine(
     :data:`STEP_BOUND` times that step closer (the SDF is 1-Lipschitz, and the fixed point is
     about that far off), so later steps look up the fields for a few only, and where ``own`` is
     given, where it has come within :data:`OWN_RADIUS` of its own preimage (the steps converge
-    on that one). A candidate whose step is shorter than :data:`CONVERGED` stops where it is.
+    on that one). A candidate whose step is shorter than :data:`CONVERGED` stops where it is
+    and is returned even where it lies more than ``epsilon`` outside (before the SDF bound
+    dropped it): the caller tests each preimage's SDF.
     """
     x = x - fields.shape_offsets(x, betas)  # the rigid guess is in the shaped rest frame
     kept, last = torch.arange(x.shape[0]), torch.zeros_like(x)
