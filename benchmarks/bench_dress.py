@@ -14,7 +14,11 @@ that model directory, e.g. to weigh an ensemble against the shipped model in the
 ``--repeat N`` dresses in-process N times with each method and reports the fastest run (this
 machine's speed varies by tens of per cent from one run to the next).
 
-Run: ``python benchmarks/bench_dress.py [--frames 1000] [--postprocess-frames 100]
+``--body LAYER`` dresses that body layer instead of the procedural walk: a real capture, e.g.
+one imported with ``usd-garment import-bvh … --arm-clearance 0`` (the arms as captured, where
+``learned+preimage`` has the most to push).
+
+Run: ``python benchmarks/bench_dress.py [--frames 1000 | --body LAYER] [--postprocess-frames 100]
 [--simulation-frames 30] [--model LABEL=DIR ...] [--repeat N] [--cli-repeat N]``
 """
 
@@ -87,7 +91,7 @@ def fastest(
     return best
 
 
-def cli_runs(body_usd: Path, folder: Path, repeat: int, frames: int) -> None:
+def cli_runs(body_usd: Path, folder: Path, repeat: int) -> None:
     """``usd-garment dress`` (default method) in a new interpreter ``repeat`` times: the stage
     processor's own figures and the wall time with the interpreter's start and imports; then the
     median and the fastest run. Run before anything else writes to disk (a run right after the
@@ -101,17 +105,22 @@ def cli_runs(body_usd: Path, folder: Path, repeat: int, frames: int) -> None:
             capture_output=True, text=True, check=True,
         )  # fmt: skip
         walls.append(time.perf_counter() - start)
-        report(f"CLI run {i + 1}, default method", json.loads(cli.stdout))
+        summary = json.loads(cli.stdout)
+        frames = summary["frames"]
+        report(f"CLI run {i + 1}, default method", summary)
         print(f"CLI run {i + 1} wall time incl. interpreter start: {walls[-1]:.2f} s, "
               f"{frames / walls[-1]:.1f} frames/s")  # fmt: skip
         (folder / f"cli{i}.usdc").unlink()
+    if not walls:
+        return
     print(f"CLI incl. interpreter start over {repeat} runs: median {frames / np.median(walls):.1f}"
           f" frames/s, fastest {frames / min(walls):.1f}")  # fmt: skip
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--frames", type=int, default=1000)
+    parser.add_argument("--frames", type=int, default=1000, help="of the procedural walk")
+    parser.add_argument("--body", type=Path, help="a body layer to dress instead of the walk")
     parser.add_argument("--postprocess-frames", type=int, default=100)
     parser.add_argument("--simulation-frames", type=int, default=30)
     parser.add_argument("--model", action="append", default=[], metavar="LABEL=DIR")
@@ -121,15 +130,17 @@ def main() -> None:
     print(f"torch {torch.__version__}, {torch.get_num_threads()} threads")
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        npz, body_usd = folder / "walk.npz", folder / "walk.usdc"
-        start = time.perf_counter()
-        procedural_npz(npz, args.frames)
-        body = load_body_model()
-        write_body_layer(body_usd, load_amass(npz, body), body)
-        print(f"built {args.frames}-frame body layer in {time.perf_counter() - start:.1f} s")
+        body_usd = args.body
+        if body_usd is None:
+            npz, body_usd = folder / "walk.npz", folder / "walk.usdc"
+            start = time.perf_counter()
+            procedural_npz(npz, args.frames)
+            body = load_body_model()
+            write_body_layer(body_usd, load_amass(npz, body), body)
+            print(f"built {args.frames}-frame body layer in {time.perf_counter() - start:.1f} s")
 
         default = default_method("tshirt", "high")
-        cli_runs(body_usd, folder, args.cli_repeat, args.frames)
+        cli_runs(body_usd, folder, args.cli_repeat)
         runs = {}
         best = f", fastest of {args.repeat} runs" if args.repeat > 1 else ""
         for method in dict.fromkeys((default, "learned+canonical", "learned+preimage", "lbs")):
@@ -149,8 +160,9 @@ def main() -> None:
             "lbs+postprocess": args.postprocess_frames,
             "simulation": args.simulation_frames,
         }
+        frames = runs[default]["frames"]
         for method, count in slices.items():
-            n = min(count, args.frames)
+            n = min(count, frames)
             runs[method] = dress(body_usd, folder / f"{method}.usdc", method=method,
                                  frames=(0, n)).to_json()  # fmt: skip
             report(f"{method} (in-process, first {n} frames)", runs[method])
