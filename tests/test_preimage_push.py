@@ -16,9 +16,9 @@ from usd_garment.canonical import preimage_push as preimage
 from usd_garment.canonical.preimage_push import PartBoxes, preimage_push
 from usd_garment.eval.body_distance import BodySurface, signed_distance
 from usd_garment.eval.push_out import PUSH_OUT_EPS
-from usd_garment.fields.body_fields import load_body_fields
+from usd_garment.fields.body_fields import BodyFields, load_body_fields
 from usd_garment.garment.library import load_template
-from usd_garment.garment.model import GarmentModel
+from usd_garment.garment.model import Articulation, GarmentModel
 from usd_garment.methods.learned import LearnedMethod, LearnedPreimageMethod
 from usd_garment.usd.read import read_smpl_motion
 
@@ -29,6 +29,22 @@ def _default_body(body_model: BodyModel, synthetic_body: BodyModel) -> BodyModel
     if body_model is synthetic_body:
         pytest.skip("needs the embedded default body and its fields")
     return body_model
+
+
+def _bent_arms_down(
+    body: BodyModel, fields: BodyFields, trans: torch.Tensor
+) -> tuple[np.ndarray, Articulation, np.ndarray]:
+    """A body bent forward with the arms lowered against the trunk, moved by ``trans``
+    ``(1, 3)``: its posed vertices ``(V, 3)``, articulation and vertex normals ``(V, 3)``."""
+    pose = torch.zeros(1, 24, 3)
+    pose[0, 3, 0] = pose[0, 6, 0] = pose[0, 9, 0] = 0.15  # the spine bent forward
+    pose[0, 16, 2], pose[0, 17, 2] = -1.2, 1.2  # the arms lowered
+    betas = torch.zeros(10)
+    with torch.no_grad():
+        posed = body(betas, pose, trans).vertices[0].numpy()
+        art = GarmentModel(body, fields).articulation(betas, pose, trans)
+    normals = trimesh.Trimesh(posed, body.faces.numpy(), process=False).vertex_normals
+    return posed, art, normals
 
 
 @pytest.mark.parametrize("early_drops", [True, False])
@@ -49,14 +65,7 @@ def test_a_point_carried_into_the_chest_is_pushed_out(
         monkeypatch.setattr(preimage, "CONVERGED", 0.0)
     fields = load_body_fields()
     betas = torch.zeros(10)
-    pose = torch.zeros(1, 24, 3)
-    pose[0, 3, 0] = pose[0, 6, 0] = pose[0, 9, 0] = 0.15  # the spine bent forward
-    pose[0, 16, 2], pose[0, 17, 2] = -1.2, 1.2  # the arms lowered
-    trans = torch.tensor([[0.1, 0.0, -0.2]])
-    with torch.no_grad():
-        posed = body(betas, pose, trans).vertices[0].numpy()
-        art = GarmentModel(body, fields).articulation(betas, pose, trans)
-    normals = trimesh.Trimesh(posed, body.faces.numpy(), process=False).vertex_normals
+    posed, art, normals = _bent_arms_down(body, fields, torch.tensor([[0.1, 0.0, -0.2]]))
     spine3 = np.flatnonzero(body.weights.numpy().argmax(axis=1) == 9)
     chest = spine3[np.argmax(posed[spine3, 2])]  # the front-most vertex of the upper chest
     inside = posed[chest] - 5e-3 * normals[chest]
@@ -171,17 +180,11 @@ def test_converged_guesses_stop_where_more_steps_leave_them(
     body = _default_body(body_model, synthetic_body)
     fields = load_body_fields()
     betas = torch.zeros(10)
-    pose = torch.zeros(1, 24, 3)
-    pose[0, 3, 0] = pose[0, 6, 0] = pose[0, 9, 0] = 0.15
-    pose[0, 16, 2], pose[0, 17, 2] = -1.2, 1.2
-    with torch.no_grad():
-        posed = body(betas, pose, torch.zeros(1, 3)).vertices[0]
-        art = GarmentModel(body, fields).articulation(betas, pose, torch.zeros(1, 3))
-    normals = trimesh.Trimesh(posed.numpy(), body.faces.numpy(), process=False).vertex_normals
+    posed, art, normals = _bent_arms_down(body, fields, torch.zeros(1, 3))
     trunk = torch.nonzero(torch.isin(body.weights.argmax(dim=1), torch.tensor([3, 6, 9])))[:, 0]
-    trunk = trunk[::4]
-    side = torch.where(torch.arange(len(trunk)) % 2 == 0, -5e-3, 5e-3)[:, None]
-    points = (posed[trunk] + side * torch.as_tensor(normals[trunk], dtype=torch.float32))[None]
+    trunk = trunk[::4].numpy()
+    side = np.where(np.arange(len(trunk)) % 2 == 0, -5e-3, 5e-3)[:, None]
+    points = torch.as_tensor(posed[trunk] + side * normals[trunk], dtype=torch.float32)[None]
     boxes = PartBoxes.of(body, betas)
     visit = torch.ones(points.shape[:2], dtype=torch.bool)
     frame, vertex, guess = preimage._candidates(points, None, art.transforms, boxes, visit)
