@@ -304,7 +304,7 @@ def _refine(
     """
     x = x - fields.shape_offsets(x, betas)  # the rigid guess is in the shaped rest frame
     kept, last = torch.arange(x.shape[0]), torch.zeros_like(x)
-    done: list[tuple[torch.Tensor, torch.Tensor, torch.Tensor]] = []  # converged (x, w, kept)
+    done: list[tuple[torch.Tensor, torch.Tensor, torch.Tensor]] = []  # found (x, w, kept)
     for step in range(PREIMAGE_STEPS + 1):
         weights, offset = fields.shaped(x, betas)
         blended = _blend(weights, frame, skin)
@@ -317,16 +317,11 @@ def _refine(
             done.append((x[found], weights[found], kept[found]))
             break
         still = delta.norm(dim=-1) >= CONVERGED
-        if not bool(still.all()):
-            done.append((x[~still], weights[~still], kept[~still]))
-            x, delta, last, offset = x[still], delta[still], last[still], offset[still]
-            kept, target, frame = kept[still], target[still], frame[still]
-            if own is not None:
-                own = own[still]
+        done.append((x[~still], weights[~still], kept[~still]))
         step_ = torch.where((delta * last).sum(-1, keepdim=True) < 0, DAMPING, 1.0) * delta
         x, last = x + step_, delta
         # The offset at the step's start stands in for the one where it ends.
-        stay = fields.sdf(x) - STEP_BOUND * step_.norm(dim=-1) < epsilon
+        stay = still & (fields.sdf(x) - STEP_BOUND * step_.norm(dim=-1) < epsilon)
         if own is not None:
             stay &= (x + offset - own).norm(dim=-1) > OWN_RADIUS
             own = own[stay]
@@ -334,7 +329,5 @@ def _refine(
         target, frame = target[stay], frame[stay]
         if kept.numel() == 0:
             break
-    if not done:
-        return x, weights[:0], kept
     x, weights, kept = (torch.cat(v) for v in zip(*done, strict=True))
     return x, weights, kept
