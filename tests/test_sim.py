@@ -347,6 +347,46 @@ def test_lead_in_matches_the_graded_rest_shape(betas: list[float]) -> None:
     assert method.settings["lead_in_stretch_p99_first"] == pytest.approx(first.stretch_p99)
 
 
+def test_root_glide_brings_the_root_up_to_the_first_velocity() -> None:
+    """Before a motion that starts at 3.3 m/s the root speeds up from rest smoothly and ends
+    where, and as fast as, the motion starts; a motion that starts at rest keeps it still."""
+    from usd_garment.methods.simulation import root_glide
+
+    fps, velocity = 30.0, np.array([3.3, 0.2, -0.5])
+    trans = np.array([[0.4, 0.9, 0.1]]) + np.arange(3)[:, None] * velocity / fps
+    glide = root_glide(trans, fps, 20)
+    assert glide.shape == (21, 3)
+    steps = np.diff(np.concatenate([glide, trans[:1]]), axis=0) * fps  # (21, 3) m/s
+    speed = np.linalg.norm(steps, axis=1)
+    assert speed[0] < 0.01 * np.linalg.norm(velocity)
+    assert np.all(np.diff(speed) > 0)
+    np.testing.assert_allclose(steps[-1], velocity, atol=1e-9)
+    np.testing.assert_allclose(root_glide(trans[:1], fps, 20), np.repeat(trans[:1], 21, 0))
+    still = np.repeat(trans[:1], 3, axis=0)
+    np.testing.assert_allclose(root_glide(still, fps, 5), np.repeat(trans[:1], 6, 0))
+
+
+def test_a_motion_that_starts_running_keeps_the_garment_on() -> None:
+    """A motion that starts at 3.5 m/s (a capture cut mid-run, as CMU 09_01): the warm-up brings
+    the body up to that speed, so no motion frame leaves a vertex farther than the good-frame
+    limit from the body (held at its start, the body ran from the cloth: 12.7 cm by frame 2)."""
+    from usd_garment.body.io import load_body_model
+    from usd_garment.garment.library import load_template
+    from usd_garment.methods.simulation import SimulationMethod
+    from usd_garment.motion.sequence import SmplMotion
+
+    pose = np.zeros((3, 24, 3), np.float32)
+    pose[:, 16, 2], pose[:, 17, 2] = -1.2, 1.2
+    trans = np.zeros((3, 3), np.float32)
+    trans[:, 2] = np.arange(3) * 3.5 / 30.0
+    motion = SmplMotion(np.zeros(10, np.float32), pose, trans, 30.0)
+    method = SimulationMethod(lead_in=4, settle=2, max_substeps=4)
+    method.predict(motion, load_body_model(None), load_template("tshirt", "low"))
+    assert method.result is not None and method.result.ok
+    limit = CheckLimits.for_garment("tshirt").far_distance
+    assert max(check.max_distance for check in method.result.checks) <= limit
+
+
 def test_body_parts_are_closed_colliders() -> None:
     """Each body part's collider is closed over its holes; the parts fill the body."""
     from usd_garment.sim.cloth import _closed_part

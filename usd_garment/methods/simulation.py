@@ -118,23 +118,43 @@ def collider_parts(body: BodyModel) -> np.ndarray:
 
 
 def lead_in_bodies(
-    body: BodyModel, motion: SmplMotion, count: int
-) -> tuple[np.ndarray, np.ndarray]:
-    """The motion's body shape in the T-pose under the motion's first root position, and
-    ``count`` frames easing it into the motion's first frame: the pose interpolated with a
-    smoothstep (the shape held), then skinned.
+    body: BodyModel, motion: SmplMotion, count: int, settle: int = 0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The motion's body shape in the T-pose, and ``count + settle`` frames bringing it into the
+    motion's first frame: the pose interpolated with a smoothstep over ``count`` frames, then
+    held for ``settle`` (the shape held throughout), skinned.
+
+    The root comes up to the motion's first velocity on the way (:func:`root_glide`), so that
+    the cloth moves with the body when the motion begins: a capture that starts mid-run would
+    otherwise take the body from rest to running speed within one frame, and the cloth, left
+    behind, falls off (CMU 09_01 starts at 3.3 m/s).
 
     Returns:
-        ``(V, 3)`` rest body (the motion's β, T-pose, at ``trans[0]``) and ``(count, V, 3)``
-        frames (m), the last of which is the motion's first frame.
+        ``(V, 3)`` rest body (the motion's β, T-pose, where the glide starts), ``(count +
+        settle, V, 3)`` frames (the motion's first frame follows the last one) and ``(3,)`` the
+        root's position in the rest body (m).
     """
     s = np.arange(1, count + 1) / max(count, 1)
     w = (s * s * (3.0 - 2.0 * s))[:, None, None]
-    trans0 = np.asarray(motion.trans[:1], dtype=np.float64)
+    first = np.asarray(motion.pose[:1], dtype=np.float64)
+    pose = np.concatenate([w * first, np.repeat(first, settle, axis=0)])
+    trans = root_glide(np.asarray(motion.trans, dtype=np.float64), motion.fps, count + settle)
     betas = np.asarray(motion.betas, dtype=np.float64)
-    rest = _posed(body, betas, np.zeros((1, NUM_JOINTS, 3)), trans0)[0]
-    pose = w * np.asarray(motion.pose[:1], dtype=np.float64)
-    return rest, _posed(body, betas, pose, np.repeat(trans0, count, axis=0))
+    rest = _posed(body, betas, np.zeros((1, NUM_JOINTS, 3)), trans[:1])[0]
+    return rest, _posed(body, betas, pose, trans[1:]), trans[0]
+
+
+def root_glide(trans: np.ndarray, fps: float, steps: int) -> np.ndarray:
+    """``(steps + 1, 3)`` root positions (m) before a motion whose root positions are ``trans``
+    ``(T, 3)`` at ``fps``: from rest, the velocity rises along a smoothstep to the motion's
+    first one, (trans[1] − trans[0])·fps (zero for a single frame), and the motion's first
+    frame would be the next position, ``trans[0]``. Positions 0 and 1..steps are the rest body
+    and the warm-up frames."""
+    velocity = (trans[1] - trans[0]) * fps if len(trans) > 1 else np.zeros(3)
+    s = np.arange(1, steps + 2) / (steps + 1)  # the steps into positions 1..steps + 1
+    ramp = s * s * (3.0 - 2.0 * s)
+    behind = np.cumsum(ramp[::-1])[::-1] / fps  # (steps + 1,): time-weighted distance to go
+    return trans[0] - behind[:, None] * velocity
 
 
 class SimulationMethod:
@@ -143,16 +163,17 @@ class SimulationMethod:
     The garment's rest geometry is the template graded to the motion's body shape (see
     ``shape_offsets``: a garment of the wearer's size); it starts from the draped template (the
     committed or cached one for this body, else draped on the spot) graded by the same offsets,
-    on the motion's body shape in the T-pose placed at the motion's first root position, which
-    eases into the first frame's pose over ``lead_in`` frames, holds it for ``settle`` frames,
-    then plays the motion. Frames that fail their checks even with ``max_substeps`` are kept
-    and flagged (``strict``: the first one fails the sequence); NaN, a garment that fell off or
-    more than ``max_bad_run`` bad frames in a row raise :class:`SimulationError`. After
+    on the motion's body shape in the T-pose, which eases into the first frame's pose over
+    ``lead_in`` frames, holds it for ``settle`` frames while its root comes up to the motion's
+    first velocity (:func:`lead_in_bodies`), then plays the motion. Frames that fail their
+    checks even with ``max_substeps`` are kept and flagged (``strict``: the first one fails the
+    sequence); NaN, a garment that fell off or more than ``max_bad_run`` bad frames in a row
+    raise :class:`SimulationError`. After
     ``predict``, ``result`` holds the ``SimResult`` and ``settings`` the per-frame quality.
     """
 
     name = "simulation"
-    version = "2"
+    version = "3"
 
     def __init__(
         self,
@@ -215,7 +236,7 @@ class SimulationMethod:
             "rest_shape": f"template graded to the body shape ({GRADING_NEIGHBOURS} nearest "
             "rest-body vertices' shape blendshapes)",
             "start_shape": "draped template graded like the rest shape, on the shaped T-pose "
-            "body; the lead-in eases the pose only",
+            "body; the lead-in eases the pose, the root comes up to the motion's first velocity",
             "contact": asdict(self.contact),
             "colliders": "trunk, " + ", ".join(COLLIDER_PARTS)
             if self.split_colliders
@@ -255,7 +276,7 @@ class SimulationMethod:
         if start.vertices.shape != template.vertices.shape:
             raise ValueError("the start shape and the template have different vertex counts")
         self.garment_limits = CheckLimits.for_garment(template.name)
-        rest, lead = lead_in_bodies(body, motion, self.lead_in)
+        rest, lead, root = lead_in_bodies(body, motion, self.lead_in, self.settle)
         frames = _posed(body, motion.betas, motion.pose, motion.trans)
         warmup = self.lead_in + self.settle
 
@@ -267,15 +288,15 @@ class SimulationMethod:
         # start on the shaped T-pose body matches the graded rest lengths from the first frame.
         offsets = shape_offsets(body, template.vertices, motion.betas)
         graded = template.vertices + offsets
-        initial = np.asarray(start.vertices, np.float64) + offsets + motion.trans[0]
+        initial = np.asarray(start.vertices, np.float64) + offsets + root
         self.result = simulate_sequence(
             graded,
             template.faces,
             body.faces.numpy(),
             frames,
             body_rest=rest,
-            lead_in=lead,
-            settle_frames=self.settle,
+            lead_in=lead,  # the settle frames included
+            settle_frames=0,
             material=self.material,
             substeps=self.substeps,
             iterations=self.iterations,
