@@ -29,6 +29,7 @@ from usd_garment.sim.cloth import (
     ContactSettings,
     SimResult,
     simulate_sequence,
+    smoothstep,
 )
 from usd_garment.sim.drape import drape_template
 from usd_garment.sim.material import ClothMaterial
@@ -135,7 +136,7 @@ def lead_in_bodies(
         root's position in the rest body (m).
     """
     s = np.arange(1, count + 1) / max(count, 1)
-    w = (s * s * (3.0 - 2.0 * s))[:, None, None]
+    w = smoothstep(s)[:, None, None]
     first = np.asarray(motion.pose[:1], dtype=np.float64)
     pose = np.concatenate([w * first, np.repeat(first, settle, axis=0)])
     trans = root_glide(np.asarray(motion.trans, dtype=np.float64), motion.fps, count + settle)
@@ -152,8 +153,7 @@ def root_glide(trans: np.ndarray, fps: float, steps: int) -> np.ndarray:
     and the warm-up frames."""
     velocity = (trans[1] - trans[0]) * fps if len(trans) > 1 else np.zeros(3)
     s = np.arange(1, steps + 2) / (steps + 1)  # the steps into positions 1..steps + 1
-    ramp = s * s * (3.0 - 2.0 * s)
-    behind = np.cumsum(ramp[::-1])[::-1] / fps  # (steps + 1,): time-weighted distance to go
+    behind = np.cumsum(smoothstep(s)[::-1])[::-1] / fps  # (steps + 1,) s at full speed to go
     return trans[0] - behind[:, None] * velocity
 
 

@@ -431,6 +431,12 @@ class SimResult:
         return int(sum(self.bad) + sum(self.lead_in_bad))
 
 
+def smoothstep(s: np.ndarray) -> np.ndarray:
+    """3s² − 2s³ of ``s`` in [0, 1]: from 0 to 1 with zero slope at both ends (the lead-in's
+    easing)."""
+    return s * s * (3.0 - 2.0 * s)
+
+
 def lead_in_frames(body_rest: np.ndarray, body_first: np.ndarray, count: int) -> np.ndarray:
     """Body frames easing from the rest pose into the first frame of a motion.
 
@@ -447,7 +453,7 @@ def lead_in_frames(body_rest: np.ndarray, body_first: np.ndarray, count: int) ->
         ``(count, Vb, 3)`` frames; the last one equals ``body_first``.
     """
     s = np.arange(1, count + 1) / max(count, 1)
-    weight = (s * s * (3.0 - 2.0 * s))[:, None, None]
+    weight = smoothstep(s)[:, None, None]
     return (1.0 - weight) * body_rest[None] + weight * body_first[None]
 
 
