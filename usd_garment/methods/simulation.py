@@ -164,12 +164,12 @@ class SimulationMethod:
     ``shape_offsets``: a garment of the wearer's size); it starts from the draped template (the
     committed or cached one for this body, else draped on the spot) graded by the same offsets,
     on the motion's body shape in the T-pose, which eases into the first frame's pose over
-    ``lead_in`` frames, holds it for ``settle`` frames while its root comes up to the motion's
-    first velocity (:func:`lead_in_bodies`), then plays the motion. Frames that fail their
-    checks even with ``max_substeps`` are kept and flagged (``strict``: the first one fails the
-    sequence); NaN, a garment that fell off or more than ``max_bad_run`` bad frames in a row
-    raise :class:`SimulationError`. After
-    ``predict``, ``result`` holds the ``SimResult`` and ``settings`` the per-frame quality.
+    ``lead_in`` frames and holds it for ``settle`` frames, its root coming up to the motion's
+    first velocity over both (:func:`lead_in_bodies`), then plays the motion. Frames that fail
+    their checks even with ``max_substeps`` are kept and flagged (``strict``: the first one
+    fails the sequence); NaN, a garment that fell off or more than ``max_bad_run`` bad frames
+    in a row raise :class:`SimulationError`. After ``predict``, ``result`` holds the
+    ``SimResult`` and ``settings`` the per-frame quality.
     """
 
     name = "simulation"
