@@ -28,8 +28,8 @@ from usd_garment.sim.cloth import (
     SUBSTEPS,
     ContactSettings,
     SimResult,
+    easing,
     simulate_sequence,
-    smoothstep,
 )
 from usd_garment.sim.drape import drape_template
 from usd_garment.sim.material import ClothMaterial
@@ -135,8 +135,7 @@ def lead_in_bodies(
         settle, V, 3)`` frames (the motion's first frame follows the last one) and ``(3,)`` the
         root's position in the rest body (m).
     """
-    s = np.arange(1, count + 1) / max(count, 1)
-    w = smoothstep(s)[:, None, None]
+    w = easing(count)[:, None, None]
     first = np.asarray(motion.pose[:1], dtype=np.float64)
     pose = np.concatenate([w * first, np.repeat(first, settle, axis=0)])
     trans = root_glide(np.asarray(motion.trans, dtype=np.float64), motion.fps, count + settle)
@@ -152,8 +151,8 @@ def root_glide(trans: np.ndarray, fps: float, steps: int) -> np.ndarray:
     frame would be the next position, ``trans[0]``. Positions 0 and 1..steps are the rest body
     and the warm-up frames."""
     velocity = (trans[1] - trans[0]) * fps if len(trans) > 1 else np.zeros(3)
-    s = np.arange(1, steps + 2) / (steps + 1)  # the steps into positions 1..steps + 1
-    behind = np.cumsum(smoothstep(s)[::-1])[::-1] / fps  # (steps + 1,) s at full speed to go
+    ramp = easing(steps + 1)  # the steps into positions 1..steps + 1
+    behind = np.cumsum(ramp[::-1])[::-1] / fps  # (steps + 1,) s at full speed to go
     return trans[0] - behind[:, None] * velocity
 
 

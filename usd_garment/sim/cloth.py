@@ -431,9 +431,10 @@ class SimResult:
         return int(sum(self.bad) + sum(self.lead_in_bad))
 
 
-def smoothstep(s: np.ndarray) -> np.ndarray:
-    """3s² − 2s³ of ``s`` in [0, 1]: from 0 to 1 with zero slope at both ends (the lead-in's
-    easing)."""
+def easing(count: int) -> np.ndarray:
+    """``(count,)`` weights rising from near 0 to 1 at the last along a smoothstep, 3s² − 2s³ of
+    s = 1/count, 2/count, …, 1 (zero slope at both ends): the lead-in's easing."""
+    s = np.arange(1, count + 1) / max(count, 1)
     return s * s * (3.0 - 2.0 * s)
 
 
@@ -452,8 +453,7 @@ def lead_in_frames(body_rest: np.ndarray, body_first: np.ndarray, count: int) ->
     Returns:
         ``(count, Vb, 3)`` frames; the last one equals ``body_first``.
     """
-    s = np.arange(1, count + 1) / max(count, 1)
-    weight = smoothstep(s)[:, None, None]
+    weight = easing(count)[:, None, None]
     return (1.0 - weight) * body_rest[None] + weight * body_first[None]
 
 
