@@ -18,7 +18,7 @@ import torch
 from usd_garment.body.io import load_body_model
 from usd_garment.body.model import BodyModel
 from usd_garment.garment.template import GarmentTemplate
-from usd_garment.sim.cloth import simulate_sequence
+from usd_garment.sim.cloth import easing, simulate_sequence
 
 FPS = 30.0
 LEFT_SHOULDER, RIGHT_SHOULDER = 16, 17
@@ -73,8 +73,7 @@ def main() -> None:
     poses = motion_poses(args.frames)
     frames = skin(body, poses)
     # The lead-in interpolates the pose (not the vertices) from the T-pose to the first frame.
-    s = np.arange(1, args.lead_in + 1) / args.lead_in
-    lead_in = skin(body, (s * s * (3 - 2 * s))[:, None, None] * poses[:1])
+    lead_in = skin(body, easing(args.lead_in)[:, None, None] * poses[:1])
     rest_body = skin(body, np.zeros((1, 24, 3)))[0]
     print(f"body {body.name}: {len(rest_body)} vertices; {args.frames} frames at {FPS:g} fps")
     for lod in args.lods:
