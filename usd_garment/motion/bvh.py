@@ -19,7 +19,9 @@ Retargeting works on world (global) rotations, so BVH joints that SMPL lacks (CM
    the OFFSETs): the shortest arc for one child; for several (pelvis, chest), the primary bone
    exactly and the others, least-squares, fixing the twist about it; each fitted after the
    SMPL parent's correction, so a rig's overall turn carries down the chain. So
-   ``G_smpl = G_bvh · C_j``, and SMPL's bones point along the BVH's in any pose.
+   ``G_smpl = G_bvh · C_j``, and SMPL's bones point along the BVH's in any pose, but for the
+   collars (:data:`REST_RELATIVE`), which keep their parent's correction: they turn as the
+   BVH's collars turn from the rig's rest, from SMPL's own rest collars.
 3. SMPL local rotations follow in SMPL's hierarchy, ``R_local = G_parent^T · G``; SMPL joints
    without a BVH counterpart get the identity.
 4. Where the body's proportions put an arm through the trunk (the capture's shoulders sit where
@@ -111,6 +113,14 @@ PRIMARY_CHILD: dict[str, str] = {
     "left_wrist": "left_hand", "right_collar": "right_shoulder",
     "right_shoulder": "right_elbow", "right_elbow": "right_wrist", "right_wrist": "right_hand",
 }  # fmt: skip
+
+#: SMPL joints that turn with their BVH joint's rotation from the rig's rest instead of
+#: aiming their bone along the BVH's: where rigs place the joint differently, the bones' rest
+#: directions differ by convention, not by posture. CMU's collar starts at the middle of the
+#: chest, so its bone to the shoulder rises by about 22° where SMPL's falls by 8°: aimed along
+#: it, SMPL's collars were raised by about 30° in every frame, the shoulder joints 8–9 cm higher
+#: against the chest than in SMPL's rest (shrugged up to the ears; stop 54).
+REST_RELATIVE: tuple[str, ...] = ("left_collar", "right_collar")
 
 _CHANNEL = re.compile(r"^([xyz])(position|rotation)$", re.IGNORECASE)
 _FLOAT = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
@@ -813,7 +823,7 @@ def _plan(
         # limb's rest twist) keeps that turn down the chain instead of a shortest arc's twist
         parent = _mapped_ancestor(mapping, j)
         base = corrections[parent] if parent is not None else np.eye(3)
-        if bvh_dirs:
+        if bvh_dirs and SMPL_JOINT_NAMES[j] not in REST_RELATIVE:
             # the first (primary) bone exactly, the others fix the twist about it
             weights = np.ones(len(bvh_dirs))
             if len(bvh_dirs) > 1:
