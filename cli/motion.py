@@ -1,4 +1,5 @@
-"""``usd-garment motion``: make procedural SMPL motions as playable USD body layers."""
+"""``usd-garment motion``: make procedural SMPL motions as playable USD body layers; gather the
+poses of many motions into a pose corpus."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ import numpy as np
 from usd_garment.body import NUM_BETAS, load_body_model
 from usd_garment.cli.errors import user_errors
 from usd_garment.cli.options import body_layer_output_option, body_model_option
+from usd_garment.motion.pose_corpus import CORPUS_FPS, build_pose_corpus, save_pose_corpus
 from usd_garment.motion.procedural import (
     ARM_CLEARANCE,
     MOTION_KINDS,
@@ -23,7 +25,7 @@ USD_SUFFIXES = (".usd", ".usda", ".usdc")
 
 @click.group()
 def motion() -> None:
-    """Procedural motions: list the kinds, make a USD body layer."""
+    """Procedural motions: list the kinds, make a USD body layer; pose corpora."""
 
 
 @motion.command("list")
@@ -91,3 +93,46 @@ def make(
         )
         write_body_layer(output, result, body)
     click.echo(f"wrote {output}: {kind}, {result.num_frames} frames at {result.fps:g} fps")
+
+
+@motion.command("poses")
+@click.argument("sources", nargs=-1, required=True, type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
+    help="Pose corpus to write (.npz).",
+)  # fmt: skip
+@click.option(
+    "--fps", type=click.FloatRange(min=0, min_open=True), default=CORPUS_FPS, show_default=True,
+    help="Rate each motion is sampled at.",
+)  # fmt: skip
+@click.option(
+    "--arm-clearance", type=click.FloatRange(min=0), default=0.0, show_default=True,
+    help="BVH captures: open the shoulders where an arm comes closer than this (m) to the "
+    "torso, as import-bvh does (0: the arms as captured; opening them is slow).",
+)  # fmt: skip
+@body_model_option
+def poses(
+    sources: tuple[Path, ...],
+    output: Path,
+    fps: float,
+    arm_clearance: float,
+    body_model: Path | None,
+) -> None:
+    """Gather the body poses of SOURCES (BVH captures, AMASS .npz, USD body layers) into a pose
+    corpus that 'train pose' can learn beside the training set's poses (its setting
+    pose.corpus): real poses need no simulated garment."""
+    if output.suffix.lower() != ".npz":
+        raise click.BadParameter("the output must end in .npz", param_hint="-o")
+    with user_errors():
+        missing = [str(p) for p in sources if not p.is_file()]
+        if missing:
+            raise FileNotFoundError(f"{missing[0]}: no such file")
+        body = load_body_model(body_model)
+        with click.progressbar(length=len(sources), label="reading motions") as bar:
+            corpus = build_pose_corpus(
+                sources, body, fps, arm_clearance or None, progress=lambda _: bar.update(1)
+            )
+        save_pose_corpus(output, corpus)
+    click.echo(
+        f"wrote {output}: {len(corpus.poses)} poses of {len(corpus.sources)} motions at {fps:g} fps"
+    )

@@ -33,7 +33,7 @@ from usd_garment.dress import dress
 from usd_garment.garment.library import load_template
 from usd_garment.garment.template import GARMENT_NAMES, LODS
 from usd_garment.methods.simulation import SimulationError, SimulationMethod
-from usd_garment.motion.bvh import is_bvh_path, load_bvh
+from usd_garment.motion.pose_corpus import read_motion_file
 from usd_garment.motion.procedural import MOTION_KINDS, make_motion, random_betas
 from usd_garment.motion.resample import resample_motion
 from usd_garment.motion.sequence import SmplMotion
@@ -42,7 +42,6 @@ from usd_garment.sim.material import ClothMaterial
 from usd_garment.usd.body_layer import write_body_layer
 from usd_garment.usd.errors import UsdInputError
 from usd_garment.usd.garment_read import read_garment_layer
-from usd_garment.usd.read import read_smpl_motion
 
 MANIFEST_NAME = "manifest.json"
 MANIFEST_FORMAT = 1
@@ -75,8 +74,8 @@ class DatasetConfig:
         open_shoulders: procedural motions open the shoulders to keep the arms clear of the
             torso (off: arms hang against the trunk as in capture).
         captures: real motions, ``(path, split)`` pairs: a BVH file (``.bvh``, ``.bvh.xz``,
-            ``.bvh.gz``) or a USD body layer, simulated on the first ``capture_shapes`` shapes,
-            whole, resampled to ``fps``.
+            ``.bvh.gz``), an AMASS ``.npz`` or a USD body layer, simulated on the first
+            ``capture_shapes`` shapes, whole, resampled to ``fps``.
         capture_shapes: how many of the shapes each capture is simulated on.
         train_only: every procedural motion goes to the train split (more training data for a
             model whose held-out motions come from another dataset); captures keep theirs.
@@ -249,12 +248,7 @@ def sequence_motion(config: DatasetConfig, spec: SequenceSpec, body: BodyModel) 
             spec.motion_kind, config.frames, config.fps, spec.motion_seed, betas, body,
             config.open_shoulders,
         )  # fmt: skip
-    if is_bvh_path(spec.capture):
-        motion, _ = load_bvh(spec.capture, body, betas=betas)
-    else:
-        motion, _ = read_smpl_motion(spec.capture, body)
-        motion.betas = betas
-    motion = resample_motion(motion, config.fps)
+    motion = resample_motion(read_motion_file(spec.capture, body, betas), config.fps)
     motion.time_codes = np.arange(motion.num_frames, dtype=np.float64)
     return motion
 

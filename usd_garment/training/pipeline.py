@@ -35,6 +35,7 @@ from usd_garment.methods.learned_model import (
     Member,
     save_learned_model,
 )
+from usd_garment.motion.pose_corpus import load_pose_corpus
 from usd_garment.regressor.gru import GarmentRegressor
 from usd_garment.regressor.pose_code import PoseCodec
 from usd_garment.training.pose import (
@@ -104,9 +105,14 @@ class TrainSettings:
         self.pose.device = self.vae.device = self.regressor.device = device
 
 
-def _train_poses(data: CanonicalSet) -> np.ndarray:
-    """``(M, 24, 3)`` poses of the ``train`` split's frames."""
-    return np.asarray(data.pose[split_frames(data, "train")], dtype=np.float32)
+def _train_poses(data: CanonicalSet, config: PoseCodecTrainConfig) -> tuple[np.ndarray, int]:
+    """``(M, 24, 3)`` poses of the ``train`` split's frames, then those of ``config.corpus``
+    (when set), and how many came from the corpus."""
+    poses = np.asarray(data.pose[split_frames(data, "train")], dtype=np.float32)
+    if config.corpus is None:
+        return poses, 0
+    corpus = load_pose_corpus(config.corpus).poses
+    return np.concatenate([poses, corpus]), len(corpus)
 
 
 def _stage_file(folder: Path, stage: str) -> Path:
@@ -204,10 +210,11 @@ def train_stage(
         if config.joint_weighting == "garment":
             template = torch.as_tensor(data.template, dtype=torch.float32)
             weights = garment_joint_weights(fields.weights(template), config.joint_weight_floor)
+        poses, from_corpus = _train_poses(data, config)
         net, history = train_pose_codec(
-            _train_poses(data), config, report, checkpoint=checkpoint, resume=resume,
-            joint_weights=weights,
-        )  # fmt: skip
+            poses, config, report, checkpoint=checkpoint, resume=resume, joint_weights=weights
+        )
+        history["corpus_poses"] = from_corpus
     elif stage == "vae":
         config = settings.vae
         net, history = train_vae(

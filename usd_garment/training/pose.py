@@ -53,6 +53,9 @@ class PoseCodecTrainConfig:
         joint_weight_floor: with ``"garment"``, the weight of a joint that moves none of the
             garment against 1 for the one that moves most (0: such joints are left out of the
             loss). Records written before this setting read back as 0.1, the floor they used.
+        corpus: a pose corpus file (``usd-garment motion poses``) whose poses are trained on
+            beside the training set's: real poses that no garment was simulated on (None: the
+            training set's poses alone).
         seed: seed of the initial weights, the split and the shuffles.
         device: torch device of the training.
     """
@@ -66,6 +69,7 @@ class PoseCodecTrainConfig:
     validation_fraction: float = 0.1
     joint_weighting: str = "uniform"
     joint_weight_floor: float = WEIGHT_FLOOR
+    corpus: str | None = None
     seed: int = 0
     device: str = "cpu"
 
