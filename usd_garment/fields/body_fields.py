@@ -21,6 +21,7 @@ import torch
 from usd_garment.atomic import atomic_output
 from usd_garment.body.joints import NUM_BETAS, NUM_JOINTS
 from usd_garment.fields.grid import DenseGrid, SparseGrid
+from usd_garment.npz_file import read_npz
 
 #: Version of the fields file layout.
 FORMAT_VERSION = 1
@@ -399,11 +400,7 @@ def load_body_fields(path: str | Path | None = None) -> BodyFields:
     path = default_fields_path() if path is None else Path(path)
     if not path.is_file():
         raise ValueError(f"{path}: no such body fields file")
-    try:
-        with np.load(path, allow_pickle=False) as npz:
-            data = {k: npz[k] for k in npz.files}
-    except (OSError, ValueError, EOFError) as exc:
-        raise ValueError(f"{path}: cannot read body fields ({exc})") from exc
+    data = read_npz(path, "cannot read body fields")
     if "version" not in data or "field_levels" not in data:
         raise ValueError(f"{path}: not a body fields file")
     if int(data["version"]) != FORMAT_VERSION:

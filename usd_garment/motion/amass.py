@@ -20,6 +20,7 @@ from usd_garment.body.joints import NUM_BETAS, NUM_JOINTS
 from usd_garment.body.model import BodyModel
 from usd_garment.motion.resample import resample_motion
 from usd_garment.motion.sequence import SmplMotion
+from usd_garment.npz_file import read_npz
 
 #: Column-convention rotation from AMASS's Z-up world to our Y-up canonical frame (−90° about X).
 ZUP_TO_YUP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
@@ -69,11 +70,7 @@ def load_amass(path: str | Path, body: BodyModel, fps: float | None = None) -> S
         AmassError: missing keys, wrong shapes or non-finite values.
     """
     path = Path(path)
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            raw = {k: data[k] for k in data.files}
-    except (OSError, ValueError, EOFError) as exc:
-        raise AmassError(f"{path}: not a readable .npz file ({exc})") from exc
+    raw = read_npz(path, "not a readable .npz file", AmassError)
     missing = [k for k in ("poses", "trans") if k not in raw]
     if missing:
         raise AmassError(f"{path}: not an AMASS motion (missing {', '.join(missing)})")

@@ -22,6 +22,7 @@ from usd_garment.motion.amass import load_amass
 from usd_garment.motion.bvh import ARM_CONTACT_CLEARANCE, is_bvh_path, load_bvh
 from usd_garment.motion.resample import resample_motion
 from usd_garment.motion.sequence import SmplMotion
+from usd_garment.npz_file import read_npz
 from usd_garment.usd.read import read_smpl_motion
 
 #: Version of the corpus file layout.
@@ -123,11 +124,7 @@ def load_pose_corpus(path: str | Path) -> PoseCorpus:
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"{path}: no such pose corpus file")
-    try:
-        with np.load(path, allow_pickle=False) as npz:
-            data = {k: npz[k] for k in npz.files}
-    except (OSError, ValueError, EOFError) as exc:
-        raise ValueError(f"{path}: not a readable pose corpus ({exc})") from exc
+    data = read_npz(path, "not a readable pose corpus")
     if int(data.get("format", -1)) != CORPUS_FORMAT or "poses" not in data:
         raise ValueError(f"{path}: not a pose corpus of format {CORPUS_FORMAT}")
     poses = np.asarray(data["poses"], dtype=np.float32)
