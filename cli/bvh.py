@@ -17,7 +17,14 @@ from usd_garment.cli.options import (
     parse_frames,
     resample_fps_option,
 )
-from usd_garment.motion.bvh import ARM_CONTACT_CLEARANCE, FLOOR_MODES, UNITS, UP_AXES, load_bvh
+from usd_garment.motion.bvh import (
+    ARM_CONTACT_CLEARANCE,
+    COLLAR_MODES,
+    FLOOR_MODES,
+    UNITS,
+    UP_AXES,
+    load_bvh,
+)
 from usd_garment.usd.body_layer import write_body_layer
 from usd_garment.usd.garment_layer import check_outputs
 
@@ -53,6 +60,12 @@ from usd_garment.usd.garment_layer import check_outputs
     "--no-arm-correction", is_flag=True,
     help="Keep the captured bone directions of the arms (same as --arm-clearance 0).",
 )  # fmt: skip
+@click.option(
+    "--collars", type=click.Choice(COLLAR_MODES), default="aimed", show_default=True,
+    help="aimed: the collar bones along the capture's (CMU captures come out shrugged, as the "
+    "shipped models were trained); rest: the collars turn from the body's rest collars "
+    "(docs/mocap.md).",
+)  # fmt: skip
 @click.option("--betas", default=None, help="Shape coefficients of the body (default zero).")
 @body_model_option
 @click.option("--no-mesh", is_flag=True, help="Write the skeleton only, without the body mesh.")
@@ -68,6 +81,7 @@ def import_bvh(
     frames: str | None,
     arm_clearance: float,
     no_arm_correction: bool,
+    collars: str,
     betas: str | None,
     body_model: Path | None,
     no_mesh: bool,
@@ -84,7 +98,7 @@ def import_bvh(
         motion, info = load_bvh(
             bvh, body, fps, beta_values, units=units, scale=scale, up_axis=up_axis,
             floor=floor, frames=frame_range,
-            arm_clearance=None if no_arm_correction else arm_clearance,
+            arm_clearance=None if no_arm_correction else arm_clearance, collars=collars,
         )  # fmt: skip
         write_body_layer(output, motion, body, with_mesh=not no_mesh)
     if as_json:
@@ -101,6 +115,7 @@ def import_bvh(
             "floor": info.floor,
             "floor_shift_m": round(info.floor_shift_m, 4),
             "arm_clearance_m": info.arm_clearance_m,
+            "collars": collars,
             "shoulder_opening": info.opening_summary(),
             "joint_map": info.joint_map,
             "drivers": {k: v for k, v in info.drivers.items() if v != info.joint_map[k]},

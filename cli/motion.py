@@ -11,6 +11,7 @@ import numpy as np
 from usd_garment.body import NUM_BETAS, load_body_model
 from usd_garment.cli.errors import user_errors
 from usd_garment.cli.options import body_layer_output_option, body_model_option
+from usd_garment.motion.bvh import COLLAR_MODES
 from usd_garment.motion.pose_corpus import CORPUS_FPS, build_pose_corpus, save_pose_corpus
 from usd_garment.motion.procedural import (
     ARM_CLEARANCE,
@@ -110,12 +111,17 @@ def make(
     help="BVH captures: open the shoulders where an arm comes closer than this (m) to the "
     "torso, as import-bvh does (0: the arms as captured; opening them is slow).",
 )  # fmt: skip
+@click.option(
+    "--collars", type=click.Choice(COLLAR_MODES), default="aimed", show_default=True,
+    help="BVH captures: the collars as import-bvh --collars retargets them.",
+)  # fmt: skip
 @body_model_option
 def poses(
     sources: tuple[Path, ...],
     output: Path,
     fps: float,
     arm_clearance: float,
+    collars: str,
     body_model: Path | None,
 ) -> None:
     """Gather the body poses of SOURCES (BVH captures, AMASS .npz, USD body layers) into a pose
@@ -130,8 +136,9 @@ def poses(
         body = load_body_model(body_model)
         with click.progressbar(length=len(sources), label="reading motions") as bar:
             corpus = build_pose_corpus(
-                sources, body, fps, arm_clearance or None, progress=lambda _: bar.update(1)
-            )
+                sources, body, fps, arm_clearance or None, collars,
+                progress=lambda _: bar.update(1),
+            )  # fmt: skip
         save_pose_corpus(output, corpus)
     click.echo(
         f"wrote {output}: {len(corpus.poses)} poses of {len(corpus.sources)} motions at {fps:g} fps"

@@ -1,6 +1,7 @@
-"""Front view of a CMU capture on the default body with the collars aimed along the BVH's (as
-before stop 54: the shoulders shrugged) and turned from SMPL's rest collars (now), beside SMPL's
-rest (``docs/mocap.md``, "The collars turn from the rest").
+"""Front view of a CMU capture on the default body with the collars aimed along the BVH's
+(``import-bvh``'s default: the shoulders shrugged) and turned from SMPL's rest collars
+(``--collars rest``), beside SMPL's rest (``docs/mocap.md``, "The collars: aimed or from the
+rest").
 
 Run: ``python examples/plot_collars.py [BVH] [FRAME] [-o docs/collars.png]`` (default: the
 T-pose frame 0 and frame 200 of ``examples/mocap/cmu_14_04.bvh.xz``).
@@ -18,7 +19,7 @@ import torch
 from usd_garment.body import load_body_model
 from usd_garment.body.joints import SMPL_JOINT_NAMES
 from usd_garment.eval.render import SKIN, draw_meshes
-from usd_garment.motion import bvh
+from usd_garment.motion.bvh import load_bvh
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
@@ -34,18 +35,14 @@ def main() -> None:
     args = parser.parse_args()
     body = load_body_model()
     frames = (0, args.frame + 1)
-    now, _ = bvh.load_bvh(args.bvh, body, frames=frames, arm_clearance=None)
-    kept, bvh.REST_RELATIVE = bvh.REST_RELATIVE, ()  # the collars aimed like the other bones
-    try:
-        before, _ = bvh.load_bvh(args.bvh, body, frames=frames, arm_clearance=None)
-    finally:
-        bvh.REST_RELATIVE = kept
+    before, _ = load_bvh(args.bvh, body, frames=frames, arm_clearance=None)  # collars aimed
+    now, _ = load_bvh(args.bvh, body, frames=frames, arm_clearance=None, collars="rest")
     cells = [
         (np.zeros((24, 3)), "SMPL rest"),
-        (before.pose[0], "T-pose frame, collars aimed"),
-        (now.pose[0], "T-pose frame, collars from rest"),
-        (before.pose[-1], f"frame {args.frame}, collars aimed"),
-        (now.pose[-1], f"frame {args.frame}, collars from rest"),
+        (before.pose[0], "T-pose frame, --collars aimed"),
+        (now.pose[0], "T-pose frame, --collars rest"),
+        (before.pose[-1], f"frame {args.frame}, --collars aimed"),
+        (now.pose[-1], f"frame {args.frame}, --collars rest"),
     ]
     fig, axes = plt.subplots(1, len(cells), figsize=(4 * len(cells), 4.2))
     faces = body.faces.numpy()

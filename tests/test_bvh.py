@@ -232,12 +232,13 @@ def test_joint_mapping_by_name_and_structure(body_model: BodyModel) -> None:
 
 
 #: Bones whose direction the import reproduces exactly: each is moved by one BVH joint (the
-#: collars' are not: they turn from SMPL's rest collars, ``REST_RELATIVE``).
+#: collars' too with ``collars="aimed"``, the default; with ``"rest"`` they turn from SMPL's
+#: rest collars).
 EXACT_BONES = (
     "left_hip>left_knee", "left_knee>left_ankle", "left_ankle>left_foot", "spine1>spine2",
-    "spine2>spine3", "left_shoulder>left_elbow", "left_elbow>left_wrist",
-    "left_wrist>left_hand", "right_hip>right_knee", "right_shoulder>right_elbow",
-    "right_elbow>right_wrist",
+    "spine2>spine3", "left_collar>left_shoulder", "left_shoulder>left_elbow",
+    "left_elbow>left_wrist", "left_wrist>left_hand", "right_hip>right_knee",
+    "right_shoulder>right_elbow", "right_elbow>right_wrist",
 )  # fmt: skip
 
 
@@ -256,10 +257,15 @@ def test_rest_pose_gives_the_bvh_rest_bone_directions(body_model: BodyModel) -> 
         motion, info = retarget(clip, body_model, floor="capture", arm_clearance=None)
         errors = bone_errors(clip, motion, info, body_model)
         assert set(EXACT_BONES) <= set(errors)
+        worst = {k: float(v.max()) for k, v in errors.items() if not k.startswith("pelvis>")}
+        assert max(worst.values()) < 1e-3, worst
+        # collars="rest": the rig's rest collars are SMPL's rest collars, the rest still aimed
+        motion, info = retarget(clip, body_model, floor="capture", arm_clearance=None,
+                                collars="rest")  # fmt: skip
+        errors = bone_errors(clip, motion, info, body_model)
         worst = {k: float(v.max()) for k, v in errors.items()
                  if not k.startswith("pelvis>") and "collar>" not in k}  # fmt: skip
         assert max(worst.values()) < 1e-3, worst
-        # the rig's rest collars are SMPL's rest collars
         np.testing.assert_allclose(motion.pose[:, [J["left_collar"], J["right_collar"]]], 0.0,
                                    atol=1e-6)  # fmt: skip
     # the real CMU rest has the arms hanging down: so do SMPL's (T-pose arms turned by 90°)
@@ -279,10 +285,12 @@ def test_rest_pose_gives_the_bvh_rest_bone_directions(body_model: BodyModel) -> 
 
 def test_collars_turn_from_the_rest_without_a_shrug(body_model: BodyModel) -> None:
     # CMU's collar bone rises from the middle of the chest, SMPL's falls from beside the neck:
-    # aimed along the BVH's, the collars rose by about 30° and the shoulders by 8-9 cm
+    # aimed along the BVH's (the default), the collars rise by about 30°, the shoulders 6-9 cm
     clip = read_bvh(CMU_CLIP)
     clip.values = clip.values[1:121]
-    motion, _ = retarget(clip, body_model, arm_clearance=None)
+    aimed, _ = retarget(clip, body_model, arm_clearance=None)
+    assert np.degrees(np.linalg.norm(aimed.pose[:, J["left_collar"]], axis=1)).min() > 25.0
+    motion, _ = retarget(clip, body_model, arm_clearance=None, collars="rest")
     rest = smpl_rest(body_model)
     joints = posed_joints(body_model, motion)
     for side in ("left", "right"):
@@ -301,7 +309,8 @@ def test_collars_turn_from_the_rest_without_a_shrug(body_model: BodyModel) -> No
     skeleton = cmu_skeleton()
     angles = {"LeftShoulder": np.array([[0.0, 0.0, 0.0], [20.0, 0.0, 0.0]])}  # ZYX: about Z
     synthetic = parse_bvh(bvh_text(skeleton, angles, np.zeros((2, 3))))
-    turned, info = retarget(synthetic, body_model, floor="capture", arm_clearance=None)
+    turned, info = retarget(synthetic, body_model, floor="capture", arm_clearance=None,
+                            collars="rest")  # fmt: skip
     collar = np.degrees(np.linalg.norm(turned.pose[:, J["left_collar"]], axis=1))
     np.testing.assert_allclose(collar, [0.0, 20.0], atol=1e-4)
     errors = bone_errors(synthetic, turned, info, body_model)

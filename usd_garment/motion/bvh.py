@@ -19,9 +19,10 @@ Retargeting works on world (global) rotations, so BVH joints that SMPL lacks (CM
    the OFFSETs): the shortest arc for one child; for several (pelvis, chest), the primary bone
    exactly and the others, least-squares, fixing the twist about it; each fitted after the
    SMPL parent's correction, so a rig's overall turn carries down the chain. So
-   ``G_smpl = G_bvh · C_j``, and SMPL's bones point along the BVH's in any pose, but for the
-   collars (:data:`REST_RELATIVE`), which keep their parent's correction: they turn as the
-   BVH's collars turn from the rig's rest, from SMPL's own rest collars.
+   ``G_smpl = G_bvh · C_j``, and SMPL's bones point along the BVH's in any pose. With
+   ``collars="rest"`` the collars (:data:`REST_RELATIVE`) keep their parent's correction
+   instead: they turn as the BVH's collars turn from the rig's rest, from SMPL's own rest
+   collars (the default, ``"aimed"``, shrugs CMU captures: see :data:`COLLAR_MODES`).
 3. SMPL local rotations follow in SMPL's hierarchy, ``R_local = G_parent^T · G``; SMPL joints
    without a BVH counterpart get the identity.
 4. Where the body's proportions put an arm through the trunk (the capture's shoulders sit where
@@ -114,13 +115,20 @@ PRIMARY_CHILD: dict[str, str] = {
     "right_shoulder": "right_elbow", "right_elbow": "right_wrist", "right_wrist": "right_hand",
 }  # fmt: skip
 
-#: SMPL joints that turn with their BVH joint's rotation from the rig's rest instead of
-#: aiming their bone along the BVH's: where rigs place the joint differently, the bones' rest
-#: directions differ by convention, not by posture. CMU's collar starts at the middle of the
-#: chest, so its bone to the shoulder rises by about 22° where SMPL's falls by 8°: aimed along
-#: it, SMPL's collars were raised by about 30° in every frame, the shoulder joints 8–9 cm higher
-#: against the chest than in SMPL's rest (shrugged up to the ears; stop 54).
+#: SMPL joints that ``collars="rest"`` turns with their BVH joint's rotation from the rig's rest
+#: instead of aiming their bone along the BVH's: where rigs place the joint differently, the
+#: bones' rest directions differ by convention, not by posture.
 REST_RELATIVE: tuple[str, ...] = ("left_collar", "right_collar")
+#: How the collars are retargeted: ``"aimed"`` (the default) points SMPL's collar bones along
+#: the BVH's like every other bone; CMU's collar starts at the middle of the chest, so its bone
+#: to the shoulder rises by about 22° where SMPL's falls by 8°, and aimed along it SMPL's collars
+#: turn up by 22–35° in every frame, the shoulder joints 6–9 cm higher along the chest than in
+#: SMPL's rest (a shrug). ``"rest"`` turns them from SMPL's rest collars (:data:`REST_RELATIVE`):
+#: the body the capture shows. The shipped models were trained on aimed collars, and are 42 mm
+#: from the simulation on four fresh captures imported with ``"rest"`` against 24 with
+#: ``"aimed"`` (stop 54, ``docs/mocap.md``), so ``"aimed"`` stays the default until they are
+#: trained again.
+COLLAR_MODES: tuple[str, ...] = ("aimed", "rest")
 
 _CHANNEL = re.compile(r"^([xyz])(position|rotation)$", re.IGNORECASE)
 _FLOAT = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
@@ -787,6 +795,7 @@ def _plan(
     rest: np.ndarray,
     smpl_rest: np.ndarray,
     scale: float,
+    rest_relative: tuple[str, ...] = (),
 ) -> _Retarget:
     """Drivers and rest corrections of the SMPL joints.
 
@@ -796,6 +805,8 @@ def _plan(
         rest: ``(J, 3)`` BVH rest positions in our frame (m).
         smpl_rest: ``(24, 3)`` SMPL rest joints (m).
         scale: metres per file unit.
+        rest_relative: SMPL joints that keep their parent's correction instead of aiming their
+            bone (:data:`REST_RELATIVE` with ``collars="rest"``).
     """
     drivers: list[int | None] = [None] * NUM_JOINTS
     corrections = np.repeat(np.eye(3)[None], NUM_JOINTS, axis=0)
@@ -823,7 +834,7 @@ def _plan(
         # limb's rest twist) keeps that turn down the chain instead of a shortest arc's twist
         parent = _mapped_ancestor(mapping, j)
         base = corrections[parent] if parent is not None else np.eye(3)
-        if bvh_dirs and SMPL_JOINT_NAMES[j] not in REST_RELATIVE:
+        if bvh_dirs and SMPL_JOINT_NAMES[j] not in rest_relative:
             # the first (primary) bone exactly, the others fix the twist about it
             weights = np.ones(len(bvh_dirs))
             if len(bvh_dirs) > 1:
@@ -863,6 +874,7 @@ def retarget(
     floor: str = "body",
     frames: tuple[int, int] | None = None,
     arm_clearance: float | None = ARM_CONTACT_CLEARANCE,
+    collars: str = "aimed",
 ) -> tuple[SmplMotion, BvhRetarget]:
     """Retarget a parsed BVH clip to an SMPL motion on ``body`` at the clip's frame rate.
 
@@ -879,6 +891,7 @@ def retarget(
         arm_clearance: open the shoulders wherever an arm comes closer than this (m) to the
             torso (:func:`~usd_garment.motion.procedural.open_shoulders`, measured at most
             :data:`ARM_CHECK_FPS` times a second); 0 or None: bone directions as captured.
+        collars: ``"aimed"`` or ``"rest"`` (:data:`COLLAR_MODES`).
 
     Returns:
         The motion (pose ``(T, 24, 3)`` axis-angle rad, trans ``(T, 3)`` m, Y-up) and a record of
@@ -891,6 +904,8 @@ def retarget(
     sk = clip.skeleton
     if arm_clearance is not None and not (math.isfinite(arm_clearance) and arm_clearance >= 0):
         raise BvhError(f"the arm clearance must be a distance (m) >= 0, got {arm_clearance}")
+    if collars not in COLLAR_MODES:
+        raise BvhError(f"unknown collar mode '{collars}' (expected {', '.join(COLLAR_MODES)})")
     if floor not in FLOOR_MODES:
         raise BvhError(f"unknown floor mode '{floor}' (expected {', '.join(FLOOR_MODES)})")
     if up_axis not in UP_AXES:
@@ -924,7 +939,7 @@ def retarget(
 
     selection = slice(frames[0], frames[1]) if frames is not None else None
     rotations, positions, rest = world_motion(clip, factor, up_rotation(axis), selection)
-    plan = _plan(sk, mapping, rest, smpl_rest, factor)
+    plan = _plan(sk, mapping, rest, smpl_rest, factor, REST_RELATIVE if collars == "rest" else ())
 
     t = rotations.shape[0]
     world = np.zeros((t, NUM_JOINTS, 3, 3))
@@ -1026,6 +1041,7 @@ def load_bvh(
     floor: str = "body",
     frames: tuple[int, int] | None = None,
     arm_clearance: float | None = ARM_CONTACT_CLEARANCE,
+    collars: str = "aimed",
 ) -> tuple[SmplMotion, BvhRetarget]:
     """Read a BVH file as an SMPL motion on ``body`` (Y-up, metres), optionally resampled.
 
@@ -1033,7 +1049,8 @@ def load_bvh(
         path: the ``.bvh`` file.
         body: see :func:`retarget`.
         fps: resample to this frame rate (slerp / lerp); the file's rate by default.
-        betas, units, scale, up_axis, floor, frames, arm_clearance: see :func:`retarget`
+        betas, units, scale, up_axis, floor, frames, arm_clearance, collars: see
+            :func:`retarget`
             (``info.shoulder_opening`` follows the resampled frames).
 
     Raises:
@@ -1044,7 +1061,7 @@ def load_bvh(
     try:
         motion, info = retarget(
             clip, body, betas, units=units, scale=scale, up_axis=up_axis, floor=floor,
-            frames=frames, arm_clearance=arm_clearance,
+            frames=frames, arm_clearance=arm_clearance, collars=collars,
         )  # fmt: skip
     except BvhError as exc:
         raise BvhError(f"{path}: {exc}") from None

@@ -54,17 +54,19 @@ def read_motion_file(
     body: BodyModel,
     betas: np.ndarray | None = None,
     arm_clearance: float | None = ARM_CONTACT_CLEARANCE,
+    collars: str = "aimed",
 ) -> SmplMotion:
     """The SMPL motion of a BVH capture (``.bvh``, ``.bvh.xz``, ``.bvh.gz``: imported as
-    ``import-bvh`` does, ``arm_clearance`` as there), an AMASS ``.npz`` or a USD body layer, at
-    its own frame rate; ``betas`` ``(10,)`` replaces the file's body shape when given.
+    ``import-bvh`` does, ``arm_clearance`` and ``collars`` as there), an AMASS ``.npz`` or a USD
+    body layer, at its own frame rate; ``betas`` ``(10,)`` replaces the file's body shape when
+    given.
 
     Raises:
         BvhError, AmassError, UsdInputError: a file of that kind that cannot be read.
     """
     path = Path(path)
     if is_bvh_path(path):
-        motion, _ = load_bvh(path, body, betas=betas, arm_clearance=arm_clearance)
+        motion, _ = load_bvh(path, body, betas=betas, arm_clearance=arm_clearance, collars=collars)
         return motion
     motion = load_amass(path, body) if path.suffix == ".npz" else read_smpl_motion(path, body)[0]
     if betas is not None:
@@ -77,10 +79,12 @@ def build_pose_corpus(
     body: BodyModel,
     fps: float = CORPUS_FPS,
     arm_clearance: float | None = None,
+    collars: str = "aimed",
     progress: Callable[[Path], None] | None = None,
 ) -> PoseCorpus:
     """The poses of the motions in ``paths`` (see :func:`read_motion_file`; BVH captures with
-    the arms as captured unless ``arm_clearance`` is given), each resampled to ``fps``;
+    the arms as captured unless ``arm_clearance`` is given, ``collars`` as
+    :func:`read_motion_file`'s), each resampled to ``fps``;
     ``progress`` is called with each file once read.
 
     Raises:
@@ -92,7 +96,7 @@ def build_pose_corpus(
         raise ValueError(f"fps must be positive, got {fps}")
     poses, sources, counts = [], [], []
     for path in map(Path, paths):
-        motion = read_motion_file(path, body, arm_clearance=arm_clearance)
+        motion = read_motion_file(path, body, arm_clearance=arm_clearance, collars=collars)
         pose = np.asarray(resample_motion(motion, fps).pose, dtype=np.float32)
         poses.append(pose)
         sources.append(path.name)
