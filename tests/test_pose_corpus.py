@@ -14,7 +14,8 @@ from click.testing import CliRunner
 from tests.test_learned import TINY, tiny_canonical_set
 from usd_garment.body.model import BodyModel
 from usd_garment.cli.main import main
-from usd_garment.motion.pose_corpus import load_pose_corpus, read_motion_file
+from usd_garment.motion.motion_file import read_motion_file
+from usd_garment.motion.pose_corpus import load_pose_corpus
 from usd_garment.motion.procedural import make_motion
 from usd_garment.motion.resample import resample_motion
 from usd_garment.usd.body_layer import write_body_layer

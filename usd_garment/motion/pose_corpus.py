@@ -18,12 +18,9 @@ import numpy as np
 from usd_garment.atomic import atomic_output
 from usd_garment.body.joints import NUM_JOINTS
 from usd_garment.body.model import BodyModel
-from usd_garment.motion.amass import load_amass
-from usd_garment.motion.bvh import ARM_CONTACT_CLEARANCE, is_bvh_path, load_bvh
+from usd_garment.motion.motion_file import read_motion_file
 from usd_garment.motion.resample import resample_motion
-from usd_garment.motion.sequence import SmplMotion
 from usd_garment.npz_file import read_npz
-from usd_garment.usd.read import read_smpl_motion
 
 #: Version of the corpus file layout.
 CORPUS_FORMAT = 1
@@ -47,31 +44,6 @@ class PoseCorpus:
     sources: list[str]
     counts: list[int]
     fps: float
-
-
-def read_motion_file(
-    path: str | Path,
-    body: BodyModel,
-    betas: np.ndarray | None = None,
-    arm_clearance: float | None = ARM_CONTACT_CLEARANCE,
-    collars: str = "aimed",
-) -> SmplMotion:
-    """The SMPL motion of a BVH capture (``.bvh``, ``.bvh.xz``, ``.bvh.gz``: imported as
-    ``import-bvh`` does, ``arm_clearance`` and ``collars`` as there), an AMASS ``.npz`` or a USD
-    body layer, at its own frame rate; ``betas`` ``(10,)`` replaces the file's body shape when
-    given.
-
-    Raises:
-        BvhError, AmassError, UsdInputError: a file of that kind that cannot be read.
-    """
-    path = Path(path)
-    if is_bvh_path(path):
-        motion, _ = load_bvh(path, body, betas=betas, arm_clearance=arm_clearance, collars=collars)
-        return motion
-    motion = load_amass(path, body) if path.suffix == ".npz" else read_smpl_motion(path, body)[0]
-    if betas is not None:
-        motion.betas = np.asarray(betas, dtype=np.float32)
-    return motion
 
 
 def build_pose_corpus(

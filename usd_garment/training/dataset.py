@@ -33,7 +33,7 @@ from usd_garment.dress import dress
 from usd_garment.garment.library import load_template
 from usd_garment.garment.template import GARMENT_NAMES, LODS
 from usd_garment.methods.simulation import SimulationError, SimulationMethod
-from usd_garment.motion.pose_corpus import read_motion_file
+from usd_garment.motion.motion_file import read_motion_file
 from usd_garment.motion.procedural import MOTION_KINDS, make_motion, random_betas
 from usd_garment.motion.resample import resample_motion
 from usd_garment.motion.sequence import SmplMotion
