@@ -69,6 +69,9 @@ def test_bad_corpus_input(body_model: BodyModel, tmp_path: Path) -> None:
     np.savez(tmp_path / "other.npz", poses=np.zeros((2, 24, 3)))
     with pytest.raises(ValueError, match="not a pose corpus"):
         load_pose_corpus(tmp_path / "other.npz")
+    np.savez(tmp_path / "partial.npz", format=np.array(1), poses=np.zeros((2, 24, 3)))
+    with pytest.raises(ValueError, match="not a pose corpus"):  # no counts, sources, fps
+        load_pose_corpus(tmp_path / "partial.npz")
     with pytest.raises(ValueError, match="no such pose corpus"):
         load_pose_corpus(tmp_path / "missing.npz")
 

@@ -101,7 +101,8 @@ def load_pose_corpus(path: str | Path) -> PoseCorpus:
     if not path.is_file():
         raise ValueError(f"{path}: no such pose corpus file")
     data = read_npz(path, "not a readable pose corpus")
-    if int(data.get("format", -1)) != CORPUS_FORMAT or "poses" not in data:
+    keys = {"format", "poses", "sources", "counts", "fps"}
+    if not keys <= data.keys() or int(data["format"]) != CORPUS_FORMAT:
         raise ValueError(f"{path}: not a pose corpus of format {CORPUS_FORMAT}")
     poses = np.asarray(data["poses"], dtype=np.float32)
     counts = [int(c) for c in data["counts"]]
