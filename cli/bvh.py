@@ -12,6 +12,7 @@ from usd_garment.cli.errors import user_errors
 from usd_garment.cli.options import (
     body_layer_output_option,
     body_model_option,
+    collars_option,
     json_option,
     parse_betas,
     parse_frames,
@@ -19,7 +20,6 @@ from usd_garment.cli.options import (
 )
 from usd_garment.motion.bvh import (
     ARM_CONTACT_CLEARANCE,
-    COLLAR_MODES,
     FLOOR_MODES,
     UNITS,
     UP_AXES,
@@ -60,12 +60,11 @@ from usd_garment.usd.garment_layer import check_outputs
     "--no-arm-correction", is_flag=True,
     help="Keep the captured bone directions of the arms (same as --arm-clearance 0).",
 )  # fmt: skip
-@click.option(
-    "--collars", type=click.Choice(COLLAR_MODES), default="aimed", show_default=True,
-    help="aimed: the collar bones along the capture's (CMU captures come out shrugged, as the "
+@collars_option(
+    "aimed: the collar bones along the capture's (CMU captures come out shrugged, as the "
     "shipped models were trained); rest: the collars turn from the body's rest collars "
-    "(docs/mocap.md).",
-)  # fmt: skip
+    "(docs/mocap.md)."
+)
 @click.option("--betas", default=None, help="Shape coefficients of the body (default zero).")
 @body_model_option
 @click.option("--no-mesh", is_flag=True, help="Write the skeleton only, without the body mesh.")

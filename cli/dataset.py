@@ -24,6 +24,7 @@ from usd_garment.cli.errors import user_errors
 from usd_garment.cli.options import (
     FrameProgress,
     body_model_option,
+    collars_option,
     fields_option,
     json_option,
     lod_option,
@@ -126,6 +127,7 @@ def dataset() -> None:
     show_default=True,
     help="How many of the body shapes each capture is simulated on (the first ones).",
 )
+@collars_option("BVH captures: the collars as import-bvh --collars retargets them.")
 @solver_options
 @workers_option
 @click.option("--resume", is_flag=True, help="Finish the dataset already in OUTPUT.")
@@ -155,6 +157,7 @@ def make(
     shape_per_motion: bool,
     captures: tuple[str, ...],
     capture_shapes: int,
+    collars: str,
     substeps: int,
     iterations: int,
     material: Path | None,
@@ -187,7 +190,7 @@ def make(
                 shape_sigma=shape_sigma, open_shoulders=open_shoulders, train_only=train_only,
                 captures=tuple(_capture(text) for text in captures),
                 capture_shapes=capture_shapes, kinds=tuple(split_list(kinds)),
-                shape_per_motion=shape_per_motion,
+                shape_per_motion=shape_per_motion, collars=collars,
             )  # fmt: skip
             splits = split_list(split_names)
             manifest = make_dataset(

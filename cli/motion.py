@@ -10,8 +10,11 @@ import numpy as np
 
 from usd_garment.body import NUM_BETAS, load_body_model
 from usd_garment.cli.errors import user_errors
-from usd_garment.cli.options import body_layer_output_option, body_model_option
-from usd_garment.motion.bvh import COLLAR_MODES
+from usd_garment.cli.options import (
+    body_layer_output_option,
+    body_model_option,
+    collars_option,
+)
 from usd_garment.motion.pose_corpus import CORPUS_FPS, build_pose_corpus, save_pose_corpus
 from usd_garment.motion.procedural import (
     ARM_CLEARANCE,
@@ -111,10 +114,7 @@ def make(
     help="BVH captures: open the shoulders where an arm comes closer than this (m) to the "
     "torso, as import-bvh does (0: the arms as captured; opening them is slow).",
 )  # fmt: skip
-@click.option(
-    "--collars", type=click.Choice(COLLAR_MODES), default="aimed", show_default=True,
-    help="BVH captures: the collars as import-bvh --collars retargets them.",
-)  # fmt: skip
+@collars_option("BVH captures: the collars as import-bvh --collars retargets them.")
 @body_model_option
 def poses(
     sources: tuple[Path, ...],

@@ -90,6 +90,16 @@ def splits_option(help_text: str) -> Callable[[F], F]:
     )
 
 
+def collars_option(help_text: str) -> Callable[[F], F]:
+    """``--collars aimed|rest``: how BVH captures' collar bones are retargeted (``import-bvh``)."""
+    from usd_garment.motion.bvh import COLLAR_MODES  # here: ``dress`` need not load it
+
+    return click.option(
+        "--collars", type=click.Choice(COLLAR_MODES), default="aimed", show_default=True,
+        help=help_text,
+    )  # fmt: skip
+
+
 def split_list(split_names: str) -> list[str]:
     """The split names of a ``--split`` value (comma-separated, spaces ignored)."""
     return [s.strip() for s in split_names.split(",")]

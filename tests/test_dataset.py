@@ -326,6 +326,30 @@ def test_a_bvh_capture_plays_whole_at_the_dataset_rate(
     np.testing.assert_array_equal(motion.time_codes, np.arange(249))
 
 
+def test_collars_reach_the_capture_reader(
+    body_model: BodyModel, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``collars`` goes to the capture reader (``import-bvh --collars``, tested in
+    ``test_bvh.py``) and into the manifest; a manifest made before the setting resumes as
+    aimed; an unknown mode is refused."""
+    clip = tmp_path / "clip.bvh"
+    clip.write_text("HIERARCHY\n")
+    asked: list[str] = []
+
+    def reader(path: Path, body: BodyModel, betas: np.ndarray, collars: str) -> Any:
+        asked.append(collars)
+        return make_motion("walk", 8, 30.0, 0, betas, body)
+
+    monkeypatch.setattr(dataset_module, "read_motion_file", reader)
+    config = DatasetConfig(motions=0, shapes=1, captures=((str(clip), "train"),), collars="rest")
+    assert sequence_motion(config, plan_sequences(config)[0], body_model).num_frames == 8
+    assert asked == ["rest"] and config.to_json()["collars"] == "rest"
+    old = {k: v for k, v in DatasetConfig(motions=2).to_json().items() if k != "collars"}
+    assert dataset_module._fixed(old) == dataset_module._fixed(DatasetConfig(motions=3).to_json())
+    with pytest.raises(ValueError, match="unknown collars"):
+        DatasetConfig(collars="up")
+
+
 def test_shape_per_motion_gives_each_motion_its_own_shapes(tmp_path: Path) -> None:
     """``shape_per_motion``: N motions × M shapes bring N × M random shapes (none is β = 0),
     the motions are those of the shared-shape plan, a plan of more motions starts with that of

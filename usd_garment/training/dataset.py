@@ -33,6 +33,7 @@ from usd_garment.dress import dress
 from usd_garment.garment.library import load_template
 from usd_garment.garment.template import GARMENT_NAMES, LODS
 from usd_garment.methods.simulation import SimulationError, SimulationMethod
+from usd_garment.motion.bvh import COLLAR_MODES
 from usd_garment.motion.motion_file import read_motion_file
 from usd_garment.motion.procedural import MOTION_KINDS, make_motion, random_betas
 from usd_garment.motion.resample import resample_motion
@@ -83,6 +84,8 @@ class DatasetConfig:
         shape_per_motion: each procedural motion gets ``shapes`` body shapes of its own, all
             drawn at random (none is β = 0): N motions bring N × M shapes, for a model that
             must hold on shapes it never saw. Captures keep the shared shapes (β = 0 first).
+        collars: how BVH captures' collar bones are retargeted (``COLLAR_MODES``, as
+            ``import-bvh --collars``).
     """
 
     garment: str = "tshirt"
@@ -102,6 +105,7 @@ class DatasetConfig:
     train_only: bool = False
     kinds: tuple[str, ...] = DATASET_KINDS
     shape_per_motion: bool = False
+    collars: str = "aimed"
 
     def __post_init__(self) -> None:
         if self.garment not in GARMENT_NAMES:
@@ -117,6 +121,8 @@ class DatasetConfig:
         unknown = [k for k in self.kinds if k not in MOTION_KINDS]
         if unknown or not self.kinds:
             raise ValueError(f"unknown motion kinds {unknown} ({', '.join(MOTION_KINDS)})")
+        if self.collars not in COLLAR_MODES:
+            raise ValueError(f"unknown collars '{self.collars}' ({', '.join(COLLAR_MODES)})")
         if not 1 <= self.capture_shapes <= self.shapes:
             raise ValueError(f"capture_shapes must be in [1, {self.shapes}]")
         for path, split in self.captures:
@@ -248,7 +254,8 @@ def sequence_motion(config: DatasetConfig, spec: SequenceSpec, body: BodyModel) 
             spec.motion_kind, config.frames, config.fps, spec.motion_seed, betas, body,
             config.open_shoulders,
         )  # fmt: skip
-    motion = resample_motion(read_motion_file(spec.capture, body, betas), config.fps)
+    captured = read_motion_file(spec.capture, body, betas, collars=config.collars)
+    motion = resample_motion(captured, config.fps)
     motion.time_codes = np.arange(motion.num_frames, dtype=np.float64)
     return motion
 
@@ -300,9 +307,12 @@ def run_sequence(folder: str, config: DatasetConfig, spec: SequenceSpec) -> dict
 def _fixed(config: dict[str, Any]) -> dict[str, Any]:
     """A config without the motion, shape and capture lists: the plan of more motions, shapes or
     captures starts with that of fewer, so a dataset can be resumed with more (a manifest made
-    before ``train_only``, ``kinds`` or ``shape_per_motion`` existed had none: it has the
-    defaults)."""
-    defaults = {"train_only": False, "kinds": list(DATASET_KINDS), "shape_per_motion": False}
+    before ``train_only``, ``kinds``, ``shape_per_motion`` or ``collars`` existed had none: it
+    has the defaults)."""
+    defaults = {
+        "train_only": False, "kinds": list(DATASET_KINDS), "shape_per_motion": False,
+        "collars": "aimed",
+    }  # fmt: skip
     return {
         k: v
         for k, v in {**defaults, **config}.items()
