@@ -330,8 +330,7 @@ def test_collars_reach_the_capture_reader(
     body_model: BodyModel, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """``collars`` goes to the capture reader (``import-bvh --collars``, tested in
-    ``test_bvh.py``) and into the manifest; a manifest made before the setting resumes as
-    aimed; an unknown mode is refused."""
+    ``test_bvh.py``) and into the manifest; an unknown mode is refused."""
     clip = tmp_path / "clip.bvh"
     clip.write_text("HIERARCHY\n")
     asked: list[str] = []
@@ -344,8 +343,6 @@ def test_collars_reach_the_capture_reader(
     config = DatasetConfig(motions=0, shapes=1, captures=((str(clip), "train"),), collars="rest")
     assert sequence_motion(config, plan_sequences(config)[0], body_model).num_frames == 8
     assert asked == ["rest"] and config.to_json()["collars"] == "rest"
-    old = {k: v for k, v in DatasetConfig(motions=2).to_json().items() if k != "collars"}
-    assert dataset_module._fixed(old) == dataset_module._fixed(DatasetConfig(motions=3).to_json())
     with pytest.raises(ValueError, match="unknown collars"):
         DatasetConfig(collars="up")
 
@@ -367,7 +364,7 @@ def test_shape_per_motion_gives_each_motion_its_own_shapes(tmp_path: Path) -> No
     assert [s.betas for s in own if s.capture] == [[0.0] * len(shared[0].betas)]
 
 
-@pytest.mark.parametrize("option", ["train_only", "kinds", "shape_per_motion"])
+@pytest.mark.parametrize("option", ["train_only", "kinds", "shape_per_motion", "collars"])
 def test_a_manifest_made_before_an_option_existed_resumes_as_it_was(option: str) -> None:
     """A manifest written before ``option`` existed lacks it, and ``_fixed`` gives it the
     default: the dataset resumes as it was."""
@@ -399,6 +396,7 @@ def test_the_data_script_makes_the_committed_sets(garment: str, tmp_path: Path) 
         for key in keys:
             assert params[key] == config[key], (name, key)
         assert params["shape_per_motion"] == config.get("shape_per_motion", False), name
+        assert params["collars"] == config.get("collars", "aimed"), name
         assert [list(_capture(text)) for text in params["captures"]] == config["captures"], name
     extra = ["v5s"] if garment == "tshirt" else ["v5s", "v6s"]
     assert made == ["v4", "v4x", "cmu4", *extra]
@@ -413,3 +411,12 @@ def test_the_data_script_makes_the_committed_sets(garment: str, tmp_path: Path) 
     then = [(f"scratch/dataset_{garment}_{n}", f"scratch/canonical_{garment}_{last}.npz")
             for n in extra]  # fmt: skip
     assert projected == first + then
+
+
+def test_the_data_script_takes_the_collars(tmp_path: Path) -> None:
+    """``COLLARS=rest bash examples/train/data.sh``: the captures imported and every set made
+    with ``--collars rest``."""
+    calls = script_calls("data.sh", "tshirt", tmp_path=tmp_path, env={"COLLARS": "rest"})
+    kinds = [a for a in calls if a[0] == "import-bvh" or a[:2] == ["dataset", "make"]]
+    assert len(kinds) == 8
+    assert all(a[a.index("--collars") + 1] == "rest" for a in kinds)
