@@ -18,7 +18,9 @@
 # Each bench writes its report folder OUT/NAME (report.json, chart.png, ...) and its log
 # OUT/NAME.log. On a 2-core machine, about an hour for the T-shirt, most of it the fresh set's
 # simulations. Needs ../shared/mocap beside the project (MOCAP=DIR to read it elsewhere);
-# LABEL names the candidate in the reports (default: its folder's name).
+# LABEL names the candidate in the reports (default: its folder's name); COLLARS (aimed by
+# default) imports CMU 131_02 as `import-bvh --collars` does, as DATA's sets were made
+# (data.sh's COLLARS).
 set -euo pipefail
 # One compound command, read whole before it runs (see data.sh).
 {
@@ -34,6 +36,7 @@ case $GARMENT in
 esac
 MOCAP=${MOCAP:-../shared/mocap}
 LABEL=${LABEL:-$(basename "$CANDIDATE")}
+COLLARS=${COLLARS:-aimed}
 SET=$DATA/dataset_${GARMENT}_v4
 FRESH=$OUT/shapes_test
 KINDS=(walk run jumping_jacks arm_swing arm_raise torso_twist torso_bend squat)
@@ -83,7 +86,7 @@ bench test --manifest "$SET" --split test --method learned --model "$LABEL=$CAND
     --workers 2
 ARMS=$OUT/cmu_131_02_arms.usdc
 [ -f "$ARMS" ] || usd-garment import-bvh "$MOCAP/cmu_131_02.bvh" -o "$ARMS" --fps 30 \
-    --arm-clearance 0
+    --arm-clearance 0 --collars "$COLLARS"
 bench arms "$ARMS" --method learned --method lbs --model "$LABEL=$CANDIDATE" --workers 2
 members=()
 for m in 0 1 2; do
