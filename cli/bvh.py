@@ -18,13 +18,7 @@ from usd_garment.cli.options import (
     parse_frames,
     resample_fps_option,
 )
-from usd_garment.motion.bvh import (
-    ARM_CONTACT_CLEARANCE,
-    FLOOR_MODES,
-    UNITS,
-    UP_AXES,
-    load_bvh,
-)
+from usd_garment.motion.bvh import ARM_CONTACT_CLEARANCE, FLOOR_MODES, UNITS, UP_AXES, load_bvh
 from usd_garment.usd.body_layer import write_body_layer
 from usd_garment.usd.garment_layer import check_outputs
 

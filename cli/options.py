@@ -92,11 +92,14 @@ def splits_option(help_text: str) -> Callable[[F], F]:
 
 def collars_option(help_text: str) -> Callable[[F], F]:
     """``--collars aimed|rest``: how BVH captures' collar bones are retargeted (``import-bvh``)."""
-    from usd_garment.motion.bvh import COLLAR_MODES  # here: ``dress`` need not load it
+    from usd_garment.motion.bvh import (
+        COLLAR_MODES,
+        DEFAULT_COLLARS,
+    )  # here: ``dress`` need not load it
 
     return click.option(
-        "--collars", type=click.Choice(COLLAR_MODES), default="aimed", show_default=True,
-        help=help_text,
+        "--collars", type=click.Choice(COLLAR_MODES), default=DEFAULT_COLLARS,
+        show_default=True, help=help_text,
     )  # fmt: skip
 
 

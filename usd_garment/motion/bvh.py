@@ -129,6 +129,8 @@ REST_RELATIVE: tuple[str, ...] = ("left_collar", "right_collar")
 #: ``"aimed"`` (stop 54, ``docs/mocap.md``), so ``"aimed"`` stays the default until they are
 #: trained again.
 COLLAR_MODES: tuple[str, ...] = ("aimed", "rest")
+#: The collar mode of every reader and command that is not told one.
+DEFAULT_COLLARS = "aimed"
 
 _CHANNEL = re.compile(r"^([xyz])(position|rotation)$", re.IGNORECASE)
 _FLOAT = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
@@ -874,7 +876,7 @@ def retarget(
     floor: str = "body",
     frames: tuple[int, int] | None = None,
     arm_clearance: float | None = ARM_CONTACT_CLEARANCE,
-    collars: str = "aimed",
+    collars: str = DEFAULT_COLLARS,
 ) -> tuple[SmplMotion, BvhRetarget]:
     """Retarget a parsed BVH clip to an SMPL motion on ``body`` at the clip's frame rate.
 
@@ -1041,7 +1043,7 @@ def load_bvh(
     floor: str = "body",
     frames: tuple[int, int] | None = None,
     arm_clearance: float | None = ARM_CONTACT_CLEARANCE,
-    collars: str = "aimed",
+    collars: str = DEFAULT_COLLARS,
 ) -> tuple[SmplMotion, BvhRetarget]:
     """Read a BVH file as an SMPL motion on ``body`` (Y-up, metres), optionally resampled.
 

@@ -9,7 +9,12 @@ import numpy as np
 
 from usd_garment.body.model import BodyModel
 from usd_garment.motion.amass import load_amass
-from usd_garment.motion.bvh import ARM_CONTACT_CLEARANCE, is_bvh_path, load_bvh
+from usd_garment.motion.bvh import (
+    ARM_CONTACT_CLEARANCE,
+    DEFAULT_COLLARS,
+    is_bvh_path,
+    load_bvh,
+)
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.usd.read import read_smpl_motion
 
@@ -19,7 +24,7 @@ def read_motion_file(
     body: BodyModel,
     betas: np.ndarray | None = None,
     arm_clearance: float | None = ARM_CONTACT_CLEARANCE,
-    collars: str = "aimed",
+    collars: str = DEFAULT_COLLARS,
 ) -> SmplMotion:
     """The SMPL motion of a BVH capture (``.bvh``, ``.bvh.xz``, ``.bvh.gz``: imported as
     ``import-bvh`` does, ``arm_clearance`` and ``collars`` as there), an AMASS ``.npz`` or a USD

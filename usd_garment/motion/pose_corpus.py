@@ -18,6 +18,7 @@ import numpy as np
 from usd_garment.atomic import atomic_output
 from usd_garment.body.joints import NUM_JOINTS
 from usd_garment.body.model import BodyModel
+from usd_garment.motion.bvh import DEFAULT_COLLARS
 from usd_garment.motion.motion_file import read_motion_file
 from usd_garment.motion.resample import resample_motion
 from usd_garment.npz_file import read_npz
@@ -51,7 +52,7 @@ def build_pose_corpus(
     body: BodyModel,
     fps: float = CORPUS_FPS,
     arm_clearance: float | None = None,
-    collars: str = "aimed",
+    collars: str = DEFAULT_COLLARS,
     progress: Callable[[Path], None] | None = None,
 ) -> PoseCorpus:
     """The poses of the motions in ``paths`` (see :func:`read_motion_file`; BVH captures with

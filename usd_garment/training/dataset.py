@@ -33,7 +33,7 @@ from usd_garment.dress import dress
 from usd_garment.garment.library import load_template
 from usd_garment.garment.template import GARMENT_NAMES, LODS
 from usd_garment.methods.simulation import SimulationError, SimulationMethod
-from usd_garment.motion.bvh import COLLAR_MODES
+from usd_garment.motion.bvh import COLLAR_MODES, DEFAULT_COLLARS
 from usd_garment.motion.motion_file import read_motion_file
 from usd_garment.motion.procedural import MOTION_KINDS, make_motion, random_betas
 from usd_garment.motion.resample import resample_motion
@@ -105,7 +105,7 @@ class DatasetConfig:
     train_only: bool = False
     kinds: tuple[str, ...] = DATASET_KINDS
     shape_per_motion: bool = False
-    collars: str = "aimed"
+    collars: str = DEFAULT_COLLARS
 
     def __post_init__(self) -> None:
         if self.garment not in GARMENT_NAMES:
@@ -311,7 +311,7 @@ def _fixed(config: dict[str, Any]) -> dict[str, Any]:
     has the defaults)."""
     defaults = {
         "train_only": False, "kinds": list(DATASET_KINDS), "shape_per_motion": False,
-        "collars": "aimed",
+        "collars": "aimed",  # what every manifest before the setting was made with
     }  # fmt: skip
     return {
         k: v
