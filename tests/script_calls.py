@@ -12,7 +12,8 @@ from pathlib import Path
 ROOT = Path(__file__).parent.parent
 
 # Logs its arguments, one JSON list a line; makes what later lines of a script read: the folder
-# of a training's --out, the file of a projection's, a motion's, a simulation's or an import's -o.
+# of a training's --out (with model.json for `train all`), the file of a projection's, a
+# motion's, a simulation's or an import's -o.
 STAND_IN = """\
 import json, pathlib, sys
 args = sys.argv[1:]
@@ -20,6 +21,8 @@ with open({log!r}, "a") as f:
     f.write(json.dumps(args) + "\\n")
 if args[0] == "train":
     pathlib.Path(args[args.index("--out") + 1]).mkdir(parents=True, exist_ok=True)
+if args[:2] == ["train", "all"]:
+    (pathlib.Path(args[args.index("--out") + 1]) / "model.json").touch()
 if args[0] in ("project", "motion", "simulate", "import-bvh"):
     pathlib.Path(args[args.index("-o") + 1]).touch()
 """

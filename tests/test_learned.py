@@ -421,6 +421,21 @@ def test_the_recipe_script_trains_again_with_other_seeds(tmp_path: Path) -> None
         script_calls("recipe.sh", "dress", "M", tmp_path=tmp_path / "two", env={"SEEDS": "3 4"})
 
 
+def test_the_recipe_script_trains_the_first_steps_at_once(tmp_path: Path) -> None:
+    """``AT_ONCE=1 recipe.sh``: the three members' ``train all`` first (run at once, so in any
+    order), each once, then the same regressor steps and join as one member after another."""
+    for name in ("one", "at_once"):
+        (tmp_path / name).mkdir()
+    one_by_one = script_calls("recipe.sh", "tshirt", "MODEL", tmp_path=tmp_path / "one")
+    at_once = script_calls(
+        "recipe.sh", "tshirt", "MODEL", tmp_path=tmp_path / "at_once", env={"AT_ONCE": "1"}
+    )
+    firsts = [c for c in one_by_one if c[:2] == ["train", "all"]]
+    assert len(firsts) == 3
+    assert sorted(at_once[:3]) == sorted(firsts)
+    assert at_once[3:] == [c for c in one_by_one if c[:2] != ["train", "all"]]
+
+
 def test_final_quality_pushes_the_learned_garment_out(body_model: BodyModel,
                                                       synthetic_body: BodyModel,
                                                       tmp_path: Path) -> None:  # fmt: skip
