@@ -22,7 +22,7 @@ from usd_garment.canonical.dataset import CanonicalSet, save_canonical_set
 from usd_garment.cli.main import main
 from usd_garment.fields.body_fields import load_body_fields
 from usd_garment.garment.library import load_template
-from usd_garment.methods.learned import _tangent, to_frames
+from usd_garment.methods.learned import Tangent, _tangents, to_frames
 from usd_garment.methods.learned_model import ModelError, load_learned_model
 from usd_garment.motion.procedural import make_motion
 from usd_garment.training.pose import PoseCodecTrainConfig
@@ -276,15 +276,50 @@ def test_the_fields_tangent_is_kept_across_chunks_while_it_is_the_cheaper() -> N
     fields = load_body_fields()
     x = torch.as_tensor(load_template("tshirt", "low").vertices).expand(8, -1, -1)
     n = x.shape[1]
-    first = _tangent(fields, x, None)
-    assert first[1] == 0.0 and torch.allclose(first[0].anchor, x[0])
-    assert _tangent(fields, x + 0.005, first) is first  # 5 mm off: still first order
+    (first,) = _tangents(fields, x, None)
+    assert first.frames == slice(0, 8) and first.far_per_frame == 0.0
+    assert first.tangent is not None and torch.allclose(first.tangent.anchor, x[0])
+    assert _tangents(fields, x + 0.005, first)[0].tangent is first.tangent  # 5 mm off
     moved = x.clone()
     moved[:, : n // 2] += 0.05  # half of each frame beyond the radius: 4 N exact lookups
-    assert _tangent(fields, moved, first) is first  # fewer than a new tangent's 7 N
+    assert _tangents(fields, moved, first)[0].tangent is first.tangent  # fewer than 7 N
     moved[:, n // 2 :] += 0.05  # all of it: 8 N
-    tangent, far = _tangent(fields, moved, first)
-    assert far == 0.0 and torch.allclose(tangent.anchor, moved.mean(dim=0))
+    (again,) = _tangents(fields, moved, first)
+    assert again.far_per_frame == 0.0 and again.tangent is not None
+    assert torch.allclose(again.tangent.anchor, moved.mean(dim=0))
+
+
+def test_a_chunk_whose_garment_moves_far_gets_an_anchor_per_part() -> None:
+    fields = load_body_fields()
+    x = torch.as_tensor(load_template("tshirt", "low").vertices).expand(32, -1, -1).clone()
+    x[16:] += 0.05  # the second half 5 cm away: about the whole mean, every point is far
+    second = x[16:].clone()
+    parts = _tangents(fields, x, None)
+    assert [p.frames for p in parts] == [slice(0, 16), slice(16, 32)]
+    for part in parts:
+        assert part.far_per_frame == 0.0 and part.tangent is not None
+        assert torch.allclose(part.tangent.anchor, x[part.frames].mean(dim=0))
+    x[16:] -= 0.045  # 5 mm: within the radius, one anchor is the cheaper
+    assert [p.frames for p in _tangents(fields, x, None)] == [slice(0, 32)]
+    # the previous chunk's last part is kept for the whole next chunk while it is the cheaper
+    kept = _tangents(fields, second + 0.001, Tangent(slice(16, 32), parts[1].tangent, 0.0))
+    assert len(kept) == 1 and kept[0].frames == slice(0, 16)
+    assert kept[0].tangent is parts[1].tangent
+
+
+def test_the_fields_tangent_matches_central_differences() -> None:
+    fields = load_body_fields()
+    anchor = torch.as_tensor(load_template("tshirt", "low").vertices[:50])
+    tangent = fields.linearized(anchor, step=2e-3)
+    value = torch.cat(fields._fields(anchor, fields._all_names), dim=-1)
+    np.testing.assert_array_equal(tangent.value.numpy(), value.numpy())  # one lookup of 7 N
+    for axis in range(3):
+        offset = torch.zeros(3)
+        offset[axis] = 2e-3
+        plus = torch.cat(fields._fields(anchor + offset, fields._all_names), dim=-1)
+        minus = torch.cat(fields._fields(anchor - offset, fields._all_names), dim=-1)
+        difference = ((plus - minus) / 4e-3).numpy()
+        np.testing.assert_allclose(tangent.derivative[..., axis].numpy(), difference, atol=1e-5)
 
 
 @pytest.mark.parametrize(("garment", "vertices"), [("tshirt", 4405), ("dress", 4432)])

@@ -252,16 +252,14 @@ class BodyFields(torch.nn.Module):
         within ``radius`` (m) of their anchor, which are looked up exactly farther out (7
         lookups of N points for a whole chunk of frames instead of one per frame: see
         :data:`LINEARIZATION_LOOKUPS`)."""
-        groups = self._fields(anchor, self._all_names)
+        offsets = torch.zeros(7, 1, 3, dtype=anchor.dtype, device=anchor.device)
+        for axis in range(3):  # the anchor, then +step and -step along each axis
+            offsets[1 + 2 * axis, 0, axis], offsets[2 + 2 * axis, 0, axis] = step, -step
+        groups = self._fields(anchor + offsets, self._all_names)  # one lookup of 7 N points
         sizes = [g.shape[-1] for g in groups]
-        values = [torch.cat(groups, dim=-1)]
-        for axis in range(3):
-            offset = torch.zeros(3, dtype=anchor.dtype, device=anchor.device)
-            offset[axis] = step
-            plus = torch.cat(self._fields(anchor + offset, self._all_names), dim=-1)
-            minus = torch.cat(self._fields(anchor - offset, self._all_names), dim=-1)
-            values.append((plus - minus) / (2.0 * step))
-        derivative = torch.stack(values[1:], dim=-1)
+        values = torch.cat(groups, dim=-1)  # (7, N, C)
+        derivative = (values[1::2] - values[2::2]) / (2.0 * step)  # (3, N, C)
+        derivative = derivative.permute(1, 2, 0).contiguous()  # (N, C, 3)
         return FieldTangent(self, anchor, values[0], derivative, sizes, radius)
 
     def _finish(

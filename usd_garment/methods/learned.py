@@ -15,6 +15,7 @@ import json
 import time
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +30,7 @@ from usd_garment.eval.body_distance import BodySurface, body_pool
 from usd_garment.eval.push_out import PUSH_OUT_EPS, PUSH_OUT_PASSES, push_out
 from usd_garment.fields.body_fields import (
     LINEARIZATION_LOOKUPS,
+    LINEARIZATION_RADIUS,
     BodyFields,
     FieldTangent,
     load_body_fields,
@@ -139,10 +141,12 @@ class LearnedMethod:
             of the template's garment.
         fields: the body's diffused fields for M_G; the default body's by default.
         exact_fields: look the fields up at every frame's canonical garment; by default they
-            are taken to first order about a chunk's mean canonical garment, kept for the
-            next chunks while that is cheaper than linearizing again (:func:`_tangent`;
-            exactly only for vertices more than 2 cm from the anchor): several times faster,
-            within 0.2 mm on average of the exact M_G (:meth:`BodyFields.linearized`).
+            are taken to first order about the mean canonical garment of a chunk, or of
+            each of the equal parts it is cut into where the garment moves far within it, kept
+            for the next chunks while that is cheaper than linearizing again
+            (:func:`_tangents`; exactly only for vertices more than 2 cm from the anchor):
+            several times faster, within 0.2 mm on average of the exact M_G
+            (:meth:`BodyFields.linearized`).
     """
 
     name = "learned"
@@ -181,7 +185,7 @@ class LearnedMethod:
     def settings(self) -> dict[str, Any]:
         out: dict[str, Any] = {
             "model": str(self.model_path) if self.model_path else "shipped",
-            "fields": "exact" if self.exact_fields else "linearized per chunk",
+            "fields": "exact" if self.exact_fields else "linearized per chunk part",
             "canonical_push_out": self.canonical_push,
             "preimage_push_out": self.preimage,
         }
@@ -277,7 +281,7 @@ class LearnedMethod:
         pose = torch.as_tensor(motion.pose, dtype=torch.float32)
         trans = torch.as_tensor(motion.trans, dtype=torch.float32)
         t_frames = motion.num_frames
-        tangent: tuple[FieldTangent, float] | None = None  # kept across chunks (_tangent)
+        tangents: list[Tangent] = []  # the last one is kept across chunks (_tangents)
         lap("load")
         z = predict_latents(model, motion)
         lap("regressor")
@@ -290,18 +294,20 @@ class LearnedMethod:
                     if self.canonical_push:
                         x = push_out_canonical(x, self._fields.sdf)
                         lap("canonical")
-                    if not self.exact_fields:
-                        tangent = _tangent(self._fields, x, tangent)
-                    first_order = tangent[0] if tangent is not None else None
+                    if self.exact_fields:
+                        tangents = [Tangent(slice(0, e - s), None, 0.0)]
+                    else:
+                        tangents = _tangents(self._fields, x, tangents[-1] if tangents else None)
                     lap("fields")
                     art = garment_model.articulation(betas, pose[s:e], trans[s:e])
                     parts, unposed = [], []
-                    # POSE_FRAMES at a time bounds the (t, N, channels) temporaries.
-                    for a in range(0, e - s, POSE_FRAMES):
-                        b = slice(a, a + POSE_FRAMES)
-                        posed = garment_model.pose(x[b], art[b], first_order)
-                        parts.append(posed.vertices)
-                        unposed.append(posed.unposed)
+                    for part in tangents:
+                        # POSE_FRAMES at a time bounds the (t, N, channels) temporaries.
+                        for a in range(part.frames.start, part.frames.stop, POSE_FRAMES):
+                            b = slice(a, min(a + POSE_FRAMES, part.frames.stop))
+                            posed = garment_model.pose(x[b], art[b], part.tangent)
+                            parts.append(posed.vertices)
+                            unposed.append(posed.unposed)
                     vertices = torch.cat(parts)
                     lap("posing")
                     if boxes is not None:  # the whole chunk at once: fewer, larger steps
@@ -323,20 +329,65 @@ class LearnedMethod:
                 clock[0] = time.perf_counter()  # the consumer's time (writing) is not ours
 
 
-def _tangent(
-    fields: BodyFields, x: torch.Tensor, last: tuple[FieldTangent, float] | None
-) -> tuple[FieldTangent, float]:
-    """The fields to first order for the canonical garments ``x`` ``(t, N, 3)`` of a chunk, and
-    the far points per frame it had on the chunk it was made for. ``last`` (the previous
-    chunk's) is kept while the exact lookups it needs for ``x`` (its far points, beyond those it
-    had per frame when made) cost less than linearizing again about ``x``'s mean."""
-    if last is not None:
-        tangent, far_per_frame = last
-        extra = tangent.far_count(x) - far_per_frame * len(x)
-        if extra < LINEARIZATION_LOOKUPS * x.shape[1]:
-            return last
-    tangent = fields.linearized(x.mean(dim=0))
-    return tangent, tangent.far_count(x) / len(x)
+@dataclass(frozen=True)
+class Tangent:
+    """The body fields to first order (None: exact) for the frames ``frames`` of a chunk, and
+    the exact lookups per frame (points beyond its radius) it needed on the frames it was
+    made for."""
+
+    frames: slice
+    tangent: FieldTangent | None
+    far_per_frame: float
+
+
+#: Numbers of equal parts a chunk may be cut into, each part linearized about its own mean.
+PART_COUNTS = (1, 2, 4, 8, 16)
+#: The cut is chosen from every this-many-th vertex's distances.
+PART_SAMPLE = 8
+
+
+def _tangents(fields: BodyFields, x: torch.Tensor, last: Tangent | None) -> list[Tangent]:
+    """The fields to first order for the canonical garments ``x`` ``(t, N, 3)`` of a chunk, in
+    consecutive parts. ``last`` (the previous chunk's last part) is kept for the whole chunk
+    while the exact lookups it needs for ``x`` (its far points, beyond those it had per frame
+    when made) cost less than linearizing again (:data:`LINEARIZATION_LOOKUPS` lookups of N
+    points). Otherwise the chunk is cut into the number of equal parts (of
+    :data:`PART_COUNTS`) that needs the fewest lookups, each part's linearization and the
+    exact lookups of its points more than the radius from that part's mean, counted on every
+    :data:`PART_SAMPLE`-th vertex: a garment that moves more than the radius within the chunk
+    (the arms of a real capture at 120 frames/s) gets an anchor per part."""
+    cost = LINEARIZATION_LOOKUPS * x.shape[1]
+    if last is not None and last.tangent is not None:
+        extra = last.tangent.far_count(x) - last.far_per_frame * len(x)
+        if extra < cost:
+            return [Tangent(slice(0, len(x)), last.tangent, last.far_per_frame)]
+    out = []
+    for frames in _parts(x, cost, LINEARIZATION_RADIUS):
+        tangent = fields.linearized(x[frames].mean(dim=0))
+        far = tangent.far_count(x[frames]) / (frames.stop - frames.start)
+        out.append(Tangent(frames, tangent, far))
+    return out
+
+
+def _parts(x: torch.Tensor, cost: int, radius: float) -> list[slice]:
+    """The frames of ``x`` ``(t, N, 3)`` cut into equal parts (see :func:`_tangents`)."""
+    sample = x[:, ::PART_SAMPLE]
+    scale = x.shape[1] / sample.shape[1]
+    best: tuple[float, list[slice]] | None = None
+    for count in PART_COUNTS:
+        if count > len(x):
+            break
+        size = -(-len(x) // count)
+        parts = [slice(a, min(a + size, len(x))) for a in range(0, len(x), size)]
+        far = sum(
+            int(((sample[p] - sample[p].mean(dim=0)).square().sum(-1) > radius**2).sum())
+            for p in parts
+        )
+        lookups = len(parts) * cost + scale * far
+        if best is None or lookups < best[0]:
+            best = (lookups, parts)
+    assert best is not None
+    return best[1]
 
 
 class LearnedPushOutMethod(LearnedMethod):
