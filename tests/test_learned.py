@@ -5,9 +5,12 @@ writes the input's time codes, and a model is refused on another body or another
 from __future__ import annotations
 
 import json
+import os
 import re
 import shutil
 import subprocess
+import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -469,6 +472,56 @@ def test_the_recipe_script_trains_the_first_steps_at_once(tmp_path: Path) -> Non
     assert len(firsts) == 3
     assert sorted(at_once[:3]) == sorted(firsts)
     assert at_once[3:] == [c for c in one_by_one if c[:2] != ["train", "all"]]
+
+
+def test_a_failed_first_step_at_once_stops_the_other_members(tmp_path: Path) -> None:
+    """``AT_ONCE=1 recipe.sh``: when one member's ``train all`` fails, the two still training
+    are stopped and the recipe exits with an error, rather than waiting on them."""
+    stand_in = tmp_path / "bin" / "usd-garment"
+    stand_in.parent.mkdir()
+    stand_in.write_text(
+        f"#!{sys.executable}\n"
+        "import os, pathlib, sys, time\n"
+        "out = sys.argv[sys.argv.index('--out') + 1]\n"
+        "if out.endswith('_m1'):  # fails once the two others are training\n"
+        f"    folder = pathlib.Path({str(tmp_path)!r})\n"
+        "    while not all((folder / f'tshirt_T30_m{m}').exists() for m in (0, 2)):\n"
+        "        time.sleep(0.05)\n"
+        "    sys.exit(1)\n"
+        f"mine = pathlib.Path({str(tmp_path)!r}, pathlib.Path(out).name)\n"
+        "mine.with_suffix('.tmp').write_text(str(os.getpid()))\n"
+        "mine.with_suffix('.tmp').rename(mine)  # whole when it appears\n"
+        "time.sleep(120)\n"
+    )
+    stand_in.chmod(0o755)
+    work = tmp_path / "work"
+    work.mkdir()
+    (work / "examples").symlink_to(Path(__file__).parent.parent / "examples")
+    env = {
+        **os.environ,
+        "AT_ONCE": "1",
+        "PATH": f"{stand_in.parent}{os.pathsep}{os.environ['PATH']}",
+    }
+    done = subprocess.run(
+        ["bash", "examples/train/recipe.sh", "tshirt", "MODEL"], env=env, cwd=work,
+        capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+    assert done.returncode != 0 and "a member's first step failed" in done.stderr
+    for name in ("tshirt_T30_m0", "tshirt_T30_m2"):
+        pid = int((tmp_path / name).read_text())  # it was training: it must be gone now
+        for _ in range(50):
+            if _state(pid) in ("", "Z"):
+                break
+            time.sleep(0.1)
+        assert _state(pid) in ("", "Z")
+
+
+def _state(pid: int) -> str:
+    """The state letter of process ``pid`` (``/proc/PID/stat``), empty once it is gone."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (FileNotFoundError, IndexError):
+        return ""
 
 
 def test_final_quality_pushes_the_learned_garment_out(body_model: BodyModel,

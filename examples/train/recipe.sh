@@ -22,7 +22,8 @@
 # starts from the run folder of the step before (--init-from), wherever RUNS puts it. AT_ONCE=1
 # runs the three members' first steps (pose code, VAE, first regressor) at once, one thread each,
 # each logged in RUNS/GARMENT_STEP_mM.out: on a 2-core machine the VAEs' epochs took 90 s each at
-# once against 46 s one after another at two threads (stop 56), 1.5x the throughput.
+# once against 46 s one after another at two threads (stop 56), 1.5x the throughput; a member
+# whose first step fails stops the other two and the recipe.
 set -euo pipefail
 # One compound command, read whole before it runs (see data.sh).
 {
@@ -56,14 +57,19 @@ again() {
     rm -f "$2/checkpoints/regressor.pt" "$2/.done"
 }
 
+# seed_of M: member M's seed option (none without SEEDS)
+seed_of() {
+    [ ${#SEED_OF[@]} -eq 0 ] || echo "--seed ${SEED_OF[$1]}"
+}
+
 # first_step M: member M's pose code, VAE and first regressor (train all), unless its run folder
 # holds them (model.json, written once all three stages are)
 first_step() {
-    local run=$RUNS/${GARMENT}_${START}_m$1 seed=()
+    local run=$RUNS/${GARMENT}_${START}_m$1 seed
     if [ -f "$run/model.json" ]; then
         return
     fi
-    [ ${#SEED_OF[@]} -eq 0 ] || seed=(--seed "${SEED_OF[$1]}")
+    read -r -a seed <<<"$(seed_of "$1")"
     usd-garment train all --data "$DATA/canonical_${GARMENT}_v4c.npz" --out "$run" \
         --device "$DEVICE" --config "$HERE/$FIRST$1.json" --resume "${seed[@]}" "${EXTRA[@]}"
 }
@@ -75,13 +81,19 @@ if [ "${AT_ONCE:-0}" = 1 ]; then
          first_step $m >"$RUNS/${GARMENT}_${START}_m$m.out" 2>&1) &
         pids+=($!)
     done
-    for pid in "${pids[@]}"; do  # a member that failed stops the recipe here
-        wait "$pid"
+    for _ in 0 1 2; do  # the first member to fail stops the others and the recipe
+        wait -n && continue
+        for pid in "${pids[@]}"; do
+            pkill -TERM -P "$pid" 2>/dev/null || true
+            kill "$pid" 2>/dev/null || true
+        done
+        echo "recipe.sh: a member's first step failed (its log: $RUNS/${GARMENT}_${START}_mM.out);" \
+            "the others were stopped (run the recipe again to resume them)" >&2
+        exit 1
     done
 fi
 for m in 0 1 2; do
-    seed=()
-    [ ${#SEED_OF[@]} -eq 0 ] || seed=(--seed "${SEED_OF[$m]}")
+    read -r -a seed <<<"$(seed_of "$m")"
     first_step $m
     run=$RUNS/${GARMENT}_${START}_m$m
     for step in $STEPS; do
