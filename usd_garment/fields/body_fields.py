@@ -41,7 +41,7 @@ def _add_rows(
     None stands for the first term, whose rows are all M."""
     if acc is None:
         return parts
-    return [a.index_put((rows,), a[rows] + p) for a, p in zip(acc, parts, strict=True)]
+    return [a.index_add_(0, rows, p) for a, p in zip(acc, parts, strict=True)]
 
 
 def _contracted(shape_dirs: torch.Tensor, betas: torch.Tensor) -> torch.Tensor:
@@ -145,7 +145,7 @@ class BodyFields(torch.nn.Module):
             level_values, alpha = level.blended(flat[todo], names)
             share = remaining[todo] * alpha
             acc = _add_rows(acc, todo, [share[:, None] * v for v in level_values])
-            remaining = remaining.index_put((todo,), remaining[todo] * (1 - alpha))
+            remaining.index_put_((todo,), remaining[todo] * (1 - alpha))
             todo = todo[alpha < 1]
             if not todo.numel():
                 break
