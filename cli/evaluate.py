@@ -28,6 +28,8 @@ ROWS = (
     ("max_penetration_mm", "max penetration depth (mm)", "{:.3f}"),
     ("max_elsewhere_mm", "max depth elsewhere (mm)", "{:.3f}"),
     ("reference_mm", "mean distance to reference (mm)", "{:.3f}"),
+    ("reference_shift_mm", "  whole-garment offset (mm)", "{:.3f}"),
+    ("reference_unshifted_mm", "  without that offset (mm)", "{:.3f}"),
     ("acceleration", "mean vertex acceleration (m/s²)", "{:.3f}"),
     ("nan_count", "NaN vertices (all frames)", "{:d}"),
 )

@@ -116,6 +116,27 @@ def test_metrics_jitter_and_nans() -> None:
     assert m.to_json()["per_frame"]["acceleration"][0] is None
 
 
+def test_the_error_to_a_reference_splits_into_the_whole_garments_offset_and_the_rest() -> None:
+    """A garment that is its reference moved up by 30 mm in frame 0, and in frame 1 the same
+    plus 4 mm outward from the centre on every vertex: the offset is 30 mm in both frames, the
+    error without it 0 then 4 mm (outward moves average out of the offset); a NaN vertex is
+    left out."""
+    body = trimesh.creation.icosphere(subdivisions=2, radius=0.1)
+    verts = np.repeat(body.vertices[None], 2, axis=0)
+    reference = verts * 1.5  # outside the body
+    points = reference + np.array([0.0, 0.03, 0.0])
+    out = reference[1] / np.linalg.norm(reference[1], axis=-1, keepdims=True)
+    points[1] += 0.004 * out
+    points[1, 3] = np.nan
+    m = evaluate_garment(points, verts, body.faces, 30.0, reference=reference)
+    np.testing.assert_allclose(m.reference_shift_mm, [30.0, 30.0], atol=0.05)
+    np.testing.assert_allclose(m.reference_unshifted_mm, [0.0, 4.0], atol=0.05)
+    assert m.reference_mm[0] == pytest.approx(30.0)
+    assert m.reference_mm[1] > 30.0
+    plain = evaluate_garment(points, verts, body.faces, 30.0)
+    assert np.isnan(plain.reference_shift_mm).all() and np.isnan(plain.reference_unshifted_mm).all()
+
+
 def test_eval_counts_where_the_vertices_inside_elsewhere_are() -> None:
     """Two separate spheres as the body's parts 'spine2' (6) and 'left_shoulder' (16): points
     inside each are counted on that part, by the triangle their closest point lies on."""

@@ -108,6 +108,7 @@ CSV_SUMMARY = (
     "within_1mm_share",
     "max_elsewhere_mm",
     "reference_mm",
+    "reference_shift_mm",
     "acceleration",
     "nan_count",
 )

@@ -32,6 +32,11 @@ class GarmentMetrics:
         max_penetration_mm: largest depth inside the body (mm); 0 when none.
         max_elsewhere_mm: largest depth of the vertices inside elsewhere (mm); 0 when none.
         reference_mm: mean per-vertex distance to a reference sequence (mm); NaN without one.
+        reference_shift_mm: length of the frame's mean offset from the reference (mm): the part
+            of the error that moves the whole garment (a garment riding up, or left behind);
+            NaN without a reference.
+        reference_unshifted_mm: mean per-vertex distance to the reference with that offset
+            taken away (mm): the error in the garment's shape and folds; NaN without one.
         acceleration: mean per-vertex acceleration magnitude (m/s²), central second difference;
             NaN on the first and last frame.
         nan_count: vertices with a NaN or infinite coordinate.
@@ -48,6 +53,8 @@ class GarmentMetrics:
     max_penetration_mm: np.ndarray
     max_elsewhere_mm: np.ndarray
     reference_mm: np.ndarray
+    reference_shift_mm: np.ndarray
+    reference_unshifted_mm: np.ndarray
     acceleration: np.ndarray
     nan_count: np.ndarray
     elsewhere_part_counts: np.ndarray | None = None
@@ -89,6 +96,8 @@ class GarmentMetrics:
             "max_penetration_mm": self.max_penetration_mm,
             "max_elsewhere_mm": self.max_elsewhere_mm,
             "reference_mm": self.reference_mm,
+            "reference_shift_mm": self.reference_shift_mm,
+            "reference_unshifted_mm": self.reference_unshifted_mm,
             "acceleration": self.acceleration,
             "nan_count": self.nan_count,
         }
@@ -137,12 +146,7 @@ def evaluate_garment(
         part_counts = np.bincount(where, minlength=len(SMPL_JOINT_NAMES))
     depth = np.where(inside, -dist, 0.0)
     n_inside = inside.sum(axis=1)
-    reference_mm = np.full(t_frames, np.nan)
-    if reference is not None:
-        ref = np.asarray(reference, dtype=np.float64)
-        if ref.shape != points.shape:
-            raise ValueError(f"reference must be {points.shape}, got {ref.shape}")
-        reference_mm = 1e3 * np.nanmean(np.linalg.norm(points - ref, axis=-1), axis=1)
+    reference_mm, shift_mm, unshifted_mm = _reference_errors(points, reference)
     acceleration = np.full(t_frames, np.nan)
     if t_frames >= 3:
         acc = (safe[2:] - 2.0 * safe[1:-1] + safe[:-2]) * fps**2
@@ -158,9 +162,33 @@ def evaluate_garment(
         max_penetration_mm=1e3 * depth.max(axis=1, initial=0.0),
         max_elsewhere_mm=1e3 * np.where(elsewhere, depth, 0.0).max(axis=1, initial=0.0),
         reference_mm=reference_mm,
+        reference_shift_mm=shift_mm,
+        reference_unshifted_mm=unshifted_mm,
         acceleration=acceleration,
         nan_count=n - finite.sum(axis=1),
         elsewhere_part_counts=part_counts,
+    )
+
+
+def _reference_errors(
+    points: np.ndarray, reference: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-frame ``(T,)`` errors (mm) of a garment ``(T, N, 3)`` (m) against ``reference`` of the
+    same shape: the mean per-vertex distance, the length of the mean offset, and the mean
+    distance once that offset is taken away; all NaN without a reference (NaN vertices are
+    left out)."""
+    nan = np.full(points.shape[0], np.nan)
+    if reference is None:
+        return nan, nan.copy(), nan.copy()
+    ref = np.asarray(reference, dtype=np.float64)
+    if ref.shape != points.shape:
+        raise ValueError(f"reference must be {points.shape}, got {ref.shape}")
+    offset = points - ref  # (T, N, 3)
+    shift = np.nanmean(offset, axis=1, keepdims=True)  # (T, 1, 3)
+    return (
+        1e3 * np.nanmean(np.linalg.norm(offset, axis=-1), axis=1),
+        1e3 * np.linalg.norm(shift[:, 0], axis=-1),
+        1e3 * np.nanmean(np.linalg.norm(offset - shift, axis=-1), axis=1),
     )
 
 
