@@ -70,6 +70,9 @@ def test_bench_command_writes_table_chart_and_curves(tmp_path: Path, walk: Path)
     assert float(rows["lbs", "low"]["reference_mm"]) == pytest.approx(0.0, abs=1e-4)
     assert float(rows["lbs+postprocess", "low"]["reference_mm"]) >= 0.0
     assert 0.0 < float(rows["lbs", "medium"]["reference_mm"]) < 1.0
+    # The whole garment's mean offset is part of the error: never more than it.
+    for r in rows.values():
+        assert 0.0 <= float(r["reference_shift_mm"]) <= float(r["reference_mm"]) + 1e-6
     # The push-out leaves no vertex inside elsewhere, lbs may; both are measured per frame.
     assert float(rows["lbs+postprocess", "low"]["inside_elsewhere_share"]) <= float(
         rows["lbs", "low"]["inside_elsewhere_share"]
@@ -87,6 +90,7 @@ def test_bench_command_writes_table_chart_and_curves(tmp_path: Path, walk: Path)
     assert [(r.label, r.lod) for r in again] == [(r["label"], r["lod"]) for r in payload["rows"]]
     table = chart_table(again).splitlines()
     assert len(table) == 6 and table[1].split()[0] == "simulation"
+    assert table[0].split()[-3:] == ["offset", "accel", "failed"]
     with pytest.raises(ValueError, match="not a bench report"):
         load_report(report / "report.csv")
     # The error table of dress --error-budget: each method x level of detail with its error.
