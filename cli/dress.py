@@ -13,6 +13,7 @@ from usd_garment.cli.options import (
     FrameProgress,
     body_model_option,
     frames_option,
+    garment_layer_output_option,
     json_option,
     lod_option,
     parse_betas,
@@ -37,13 +38,7 @@ QUALITY_LODS = {"draft": "low", "final": "high"}
 
 @click.command("dress")
 @click.argument("input_path", metavar="INPUT", type=click.Path(path_type=Path))
-@click.option(
-    "-o",
-    "--output",
-    type=click.Path(dir_okay=False, path_type=Path),
-    required=True,
-    help="Garment layer to write (.usdc, .usd or .usda).",
-)
+@garment_layer_output_option
 @click.option(
     "--garment",
     default="tshirt",

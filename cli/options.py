@@ -56,6 +56,13 @@ body_layer_output_option = click.option(
     required=True,
     help="USD body layer to write (.usda, .usdc or .usd).",
 )
+garment_layer_output_option = click.option(
+    "-o",
+    "--output",
+    type=click.Path(dir_okay=False, path_type=Path),
+    required=True,
+    help="Garment layer to write (.usdc, .usd or .usda).",
+)
 resample_fps_option = click.option(
     "--fps", type=click.FloatRange(min=0, min_open=True), default=None,
     help="Resample to this frame rate (default: the file's own).",

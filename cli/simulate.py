@@ -13,6 +13,7 @@ from usd_garment.cli.options import (
     FrameProgress,
     body_model_option,
     frames_option,
+    garment_layer_output_option,
     json_option,
     lod_option,
     parse_frames,
@@ -28,13 +29,7 @@ from usd_garment.sim.material import ClothMaterial
 
 @click.command("simulate")
 @click.argument("input_path", metavar="BODY", type=click.Path(path_type=Path))
-@click.option(
-    "-o",
-    "--output",
-    type=click.Path(dir_okay=False, path_type=Path),
-    required=True,
-    help="Garment layer to write (.usdc, .usd or .usda).",
-)
+@garment_layer_output_option
 @click.option("--garment", type=click.Choice(GARMENT_NAMES), default="tshirt", show_default=True)
 @lod_option
 @solver_options
