@@ -131,8 +131,8 @@ def test_only_some_splits_run(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -
         make_dataset(tmp_path / "e", config, splits=("holdout",))
 
 
-@pytest.mark.slow
 def test_two_workers(tmp_path: Path) -> None:
+    """Two worker processes (10 s: run by default, as it checks their torch threads)."""
     config = DatasetConfig(lod="low", motions=2, shapes=1, frames=5)
     seen: list[str] = []
     manifest = make_dataset(
@@ -140,6 +140,8 @@ def test_two_workers(tmp_path: Path) -> None:
     )
     assert sorted(seen) == ["m00_s0", "m01_s0"]
     assert manifest["summary"]["ok"] == 2 and manifest["summary"]["frames_ok"] == 10
+    # One torch thread a worker: two workers at two threads each overfill two cores.
+    assert [s["torch_threads"] for s in manifest["sequences"]] == [1, 1]
     assert np.isfinite(manifest["summary"]["bytes"])
 
 
