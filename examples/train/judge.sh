@@ -70,7 +70,7 @@ export FRESH GARMENT
 start=$SECONDS
 for k in "${!KINDS[@]}"; do
     echo "${KINDS[$k]} $((FIRST_SEED + k))"
-done | xargs -P 2 -L 1 bash -c 'fresh_one "$0" "$1"'
+done | OMP_NUM_THREADS=1 xargs -P 2 -L 1 bash -c 'fresh_one "$0" "$1"'  # 1 thread each: 2 cores
 echo "fresh set: $((SECONDS - start)) s"
 inputs=()
 for k in "${!KINDS[@]}"; do
