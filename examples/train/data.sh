@@ -13,8 +13,8 @@
 # The T-shirt's sets are larger (three body shapes a motion, the dress's two): v4 51 min, v4x 34
 # (stop 42), cmu4 16 and v5s 18 (stop 43): about 2 h of simulation, then 12 minutes of
 # projection. Those times are from before stop 58, whose workers run one torch thread each:
-# two simulations at once then took 0.47 s a frame against 0.75 (the figures above should
-# shrink by about that much; not yet measured on a whole set).
+# the T-shirt's v5s then took 14.5 minutes, about 2.5 times as fast as before on the same
+# machine (docs/simulation.md, "Training data").
 #
 # Each set can be held to its newest committed manifest (dress: *_stop41, v5s *_stop40; T-shirt:
 # v4 and v4x *_stop42, cmu4 and v5s *_stop43): usd-garment dataset compare
