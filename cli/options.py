@@ -49,20 +49,21 @@ lod_option = click.option(
     "--lod", type=click.Choice(tuple(LODS)), default="high", show_default=True,
     help="Garment level of detail.",
 )  # fmt: skip
-body_layer_output_option = click.option(
-    "-o",
-    "--output",
-    type=click.Path(dir_okay=False, path_type=Path),
-    required=True,
-    help="USD body layer to write (.usda, .usdc or .usd).",
-)
-garment_layer_output_option = click.option(
-    "-o",
-    "--output",
-    type=click.Path(dir_okay=False, path_type=Path),
-    required=True,
-    help="Garment layer to write (.usdc, .usd or .usda).",
-)
+
+
+def _layer_output_option(what: str) -> Callable[[F], F]:
+    """The required ``-o/--output`` file option of a command that writes ``what``."""
+    return click.option(
+        "-o",
+        "--output",
+        type=click.Path(dir_okay=False, path_type=Path),
+        required=True,
+        help=f"{what} to write (.usda, .usdc or .usd).",
+    )
+
+
+body_layer_output_option = _layer_output_option("USD body layer")
+garment_layer_output_option = _layer_output_option("Garment layer")
 resample_fps_option = click.option(
     "--fps", type=click.FloatRange(min=0, min_open=True), default=None,
     help="Resample to this frame rate (default: the file's own).",
