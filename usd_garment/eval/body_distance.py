@@ -363,9 +363,10 @@ class BodyPool:
 
     def __init__(self, workers: int) -> None:
         self.workers = workers
-        self._executor = ProcessPoolExecutor(
-            workers, mp_context=multiprocessing.get_context("spawn"), initializer=_start_worker
-        )
+        self._executor = ProcessPoolExecutor(  # one torch thread: one core per worker
+            workers, mp_context=multiprocessing.get_context("spawn"),
+            initializer=torch.set_num_threads, initargs=(1,),
+        )  # fmt: skip
 
     def map(self, function: Callable[..., Any], *jobs: Iterable[Any]) -> Iterator[Any]:
         """``function(*args)`` for the arguments of each job in the workers (a module-level
@@ -397,11 +398,6 @@ def body_pool(workers: int) -> AbstractContextManager[BodyPool | None]:
 
 #: The body topology last used by this worker process (:class:`BodyPool`).
 _WORKER_SURFACE: list[BodySurface] = []
-
-
-def _start_worker() -> None:
-    """One torch thread: one core per worker."""
-    torch.set_num_threads(1)
 
 
 def worker_surface(faces: np.ndarray, num_vertices: int) -> BodySurface:
