@@ -221,7 +221,7 @@ def test_the_judge_script_benches_a_candidate_as_the_rules_did(
     assert members["inputs"] == (v4 / "c01_s0_body.usdc", v4 / "c02_s0_body.usdc")
     assert len(members["models"]) == 7  # the candidate and both models' three members
     imported = [c for c in calls if c[0] == "import-bvh"]
-    assert [c[c.index("--collars") + 1] for c in imported] == ["aimed"]
-    (tmp_path / "rest").mkdir()
-    again = script_calls("judge.sh", *args, tmp_path=tmp_path / "rest", env={"COLLARS": "rest"})
-    assert [c[c.index("--collars") + 1] for c in again if c[0] == "import-bvh"] == ["rest"]
+    assert [c[c.index("--collars") + 1] for c in imported] == ["rest"]
+    (tmp_path / "aimed").mkdir()
+    again = script_calls("judge.sh", *args, tmp_path=tmp_path / "aimed", env={"COLLARS": "aimed"})
+    assert [c[c.index("--collars") + 1] for c in again if c[0] == "import-bvh"] == ["aimed"]

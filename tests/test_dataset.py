@@ -366,12 +366,22 @@ def test_shape_per_motion_gives_each_motion_its_own_shapes(tmp_path: Path) -> No
     assert [s.betas for s in own if s.capture] == [[0.0] * len(shared[0].betas)]
 
 
-@pytest.mark.parametrize("option", ["train_only", "kinds", "shape_per_motion", "collars"])
-def test_a_manifest_made_before_an_option_existed_resumes_as_it_was(option: str) -> None:
-    """A manifest written before ``option`` existed lacks it, and ``_fixed`` gives it the
-    default: the dataset resumes as it was."""
-    before = {k: v for k, v in DatasetConfig().to_json().items() if k != option}
-    assert dataset_module._fixed(before) == dataset_module._fixed(DatasetConfig().to_json())
+#: Each option a manifest may lack, with the value that sets made before it had (if not today's
+#: default).
+OPTIONS_ADDED = [("train_only", {}), ("kinds", {}), ("shape_per_motion", {}),
+                 ("collars", {"collars": "aimed"})]  # fmt: skip
+
+
+@pytest.mark.parametrize("option,then", OPTIONS_ADDED)
+def test_a_manifest_made_before_an_option_existed_resumes_as_it_was(
+    option: str, then: dict[str, Any]
+) -> None:
+    """A manifest written before ``option`` existed lacks it, and ``_fixed`` gives it the value
+    every set had then (``then``'s, else today's default): the dataset resumes as it was (the
+    collars were aimed until the setting came, ``rest`` is the default since stop 59)."""
+    made_then = DatasetConfig(**then).to_json()
+    before = {k: v for k, v in made_then.items() if k != option}
+    assert dataset_module._fixed(before) == dataset_module._fixed(made_then)
 
 
 #: The committed manifests of the training sets.
@@ -412,11 +422,11 @@ def _tails(captures: list[list[str]]) -> list[tuple[tuple[str, ...], str]]:
 
 @pytest.mark.parametrize("garment", ["tshirt", "dress"])
 def test_the_data_script_makes_the_committed_sets(garment: str, tmp_path: Path) -> None:
-    """``examples/train/data.sh GARMENT`` imports the captures and makes each set with the
-    settings its committed manifest (``docs/datasets/GARMENT_NAME_manifest.json``) records (its
-    ``dataset make`` lines read by the command's own parser), then projects the sets onto the
-    two canonical sets."""
-    calls = script_calls("data.sh", garment, tmp_path=tmp_path)
+    """``COLLARS=aimed examples/train/data.sh GARMENT`` imports the captures and makes each set
+    with the settings its committed manifest (``docs/datasets/GARMENT_NAME_manifest.json``: the
+    T-shirt's version 7 and the dress's version 9 data) records (its ``dataset make`` lines read
+    by the command's own parser), then projects the sets onto the two canonical sets."""
+    calls = script_calls("data.sh", garment, tmp_path=tmp_path, env={"COLLARS": "aimed"})
     made = _sets_made_as_committed(calls, garment, "")
     extra = ["v5s"] if garment == "tshirt" else ["v5s", "v6s"]
     assert made == ["v4", "v4x", "cmu4", *extra]
@@ -434,10 +444,10 @@ def test_the_data_script_makes_the_committed_sets(garment: str, tmp_path: Path) 
 
 
 def test_the_data_script_takes_the_collars(tmp_path: Path) -> None:
-    """``COLLARS=rest bash examples/train/data.sh``: the captures imported and every set made
-    with ``--collars rest``, as the T-shirt's sets of stop 55 were
+    """``bash examples/train/data.sh tshirt``: by default the captures imported and every set
+    made with ``--collars rest``, as the T-shirt's version 8 sets of stop 55 were
     (``docs/datasets/tshirt_NAME_rest_stop55_manifest.json``)."""
-    calls = script_calls("data.sh", "tshirt", tmp_path=tmp_path, env={"COLLARS": "rest"})
+    calls = script_calls("data.sh", "tshirt", tmp_path=tmp_path)
     kinds = [a for a in calls if a[0] == "import-bvh" or a[:2] == ["dataset", "make"]]
     assert len(kinds) == 8
     assert all(a[a.index("--collars") + 1] == "rest" for a in kinds)

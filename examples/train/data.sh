@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# The training data of a shipped model (the T-shirt's version 7, the dress's version 9), made
+# The training data of a shipped model (the T-shirt's version 8; the dress's version 9 with
+# COLLARS=aimed, below), made
 # from nothing with the current simulator: the four extra CMU captures imported, the simulated
 # sets, and the canonical sets its training reads (docs/learning.md, "The dress's data in one
 # command").
@@ -20,9 +21,10 @@
 # v4 and v4x *_stop42, cmu4 and v5s *_stop43): usd-garment dataset compare
 # docs/datasets/GARMENT_NAME_..._manifest.json OUT/dataset_GARMENT_NAME
 #
-# COLLARS=rest imports and simulates the captures with `import-bvh --collars rest` (the collars
-# from the body's rest collars, no shrug: docs/mocap.md); aimed, the default, is how the shipped
-# models' data was made. Give each its own OUT: imports already in OUT are kept.
+# COLLARS (rest by default, as `import-bvh`) is how the captures are imported and simulated:
+# rest, the collars from the body's rest collars (no shrug: docs/mocap.md), made the T-shirt's
+# version 8 data (stop 58, in scratch/rest); COLLARS=aimed the T-shirt's version 7 and the
+# dress's version 9 data. Give each its own OUT: imports already in OUT are kept.
 #
 #   canonical_GARMENT_v4c.npz      v4 + v4x + cmu4: the members' VAEs and pose codes
 #   canonical_tshirt_v4cs.npz      v4c + v5s: the T-shirt's regressors
@@ -41,7 +43,7 @@ case $GARMENT in
     *) echo "data.sh: the garment is tshirt or dress, not '$GARMENT'" >&2; exit 2 ;;
 esac
 MOCAP=${MOCAP:-../shared/mocap}
-COLLARS=${COLLARS:-aimed}
+COLLARS=${COLLARS:-rest}
 EXTRA="$(dirname "$0")/../mocap"
 CAPTURES=$OUT/mocap_extra/usd
 mkdir -p "$CAPTURES"

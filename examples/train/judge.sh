@@ -18,7 +18,7 @@
 # Each bench writes its report folder OUT/NAME (report.json, chart.png, ...) and its log
 # OUT/NAME.log. On a 2-core machine, about an hour for the T-shirt, most of it the fresh set's
 # simulations. Needs ../shared/mocap beside the project (MOCAP=DIR to read it elsewhere);
-# LABEL names the candidate in the reports (default: its folder's name); COLLARS (aimed by
+# LABEL names the candidate in the reports (default: its folder's name); COLLARS (rest by
 # default) imports CMU 131_02 as `import-bvh --collars` does, as DATA's sets were made
 # (data.sh's COLLARS).
 set -euo pipefail
@@ -36,7 +36,7 @@ case $GARMENT in
 esac
 MOCAP=${MOCAP:-../shared/mocap}
 LABEL=${LABEL:-$(basename "$CANDIDATE")}
-COLLARS=${COLLARS:-aimed}
+COLLARS=${COLLARS:-rest}
 SET=$DATA/dataset_${GARMENT}_v4
 FRESH=$OUT/shapes_test
 KINDS=(walk run jumping_jacks arm_swing arm_raise torso_twist torso_bend squat)

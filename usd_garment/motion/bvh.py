@@ -22,7 +22,7 @@ Retargeting works on world (global) rotations, so BVH joints that SMPL lacks (CM
    ``G_smpl = G_bvh · C_j``, and SMPL's bones point along the BVH's in any pose. With
    ``collars="rest"`` the collars (:data:`REST_RELATIVE`) keep their parent's correction
    instead: they turn as the BVH's collars turn from the rig's rest, from SMPL's own rest
-   collars (the default, ``"aimed"``, shrugs CMU captures: see :data:`COLLAR_MODES`).
+   collars (the default; ``"aimed"`` shrugs CMU captures: see :data:`COLLAR_MODES`).
 3. SMPL local rotations follow in SMPL's hierarchy, ``R_local = G_parent^T · G``; SMPL joints
    without a BVH counterpart get the identity.
 4. Where the body's proportions put an arm through the trunk (the capture's shoulders sit where
@@ -119,18 +119,17 @@ PRIMARY_CHILD: dict[str, str] = {
 #: instead of aiming their bone along the BVH's: where rigs place the joint differently, the
 #: bones' rest directions differ by convention, not by posture.
 REST_RELATIVE: tuple[str, ...] = ("left_collar", "right_collar")
-#: How the collars are retargeted: ``"aimed"`` (the default) points SMPL's collar bones along
-#: the BVH's like every other bone; CMU's collar starts at the middle of the chest, so its bone
-#: to the shoulder rises by about 22° where SMPL's falls by 8°, and aimed along it SMPL's collars
-#: turn up by 22–35° in every frame, the shoulder joints 6–9 cm higher along the chest than in
-#: SMPL's rest (a shrug). ``"rest"`` turns them from SMPL's rest collars (:data:`REST_RELATIVE`):
-#: the body the capture shows. The shipped models were trained on aimed collars, and are 42 mm
-#: from the simulation on four fresh captures imported with ``"rest"`` against 24 with
-#: ``"aimed"`` (stop 54, ``docs/mocap.md``), so ``"aimed"`` stays the default until they are
-#: trained again.
+#: How the collars are retargeted: ``"aimed"`` points SMPL's collar bones along the BVH's like
+#: every other bone; CMU's collar starts at the middle of the chest, so its bone to the shoulder
+#: rises by about 22° where SMPL's falls by 8°, and aimed along it SMPL's collars turn up by
+#: 22–35° in every frame, the shoulder joints 6–9 cm higher along the chest than in SMPL's rest
+#: (a shrug). ``"rest"`` (the default since stop 59) turns them from SMPL's rest collars
+#: (:data:`REST_RELATIVE`): the body the capture shows. The T-shirt from version 8 on was trained
+#: on ``"rest"`` captures; the dress's version 9 and the T-shirt's version 7 on ``"aimed"`` ones
+#: (``docs/mocap.md``, "The collars").
 COLLAR_MODES: tuple[str, ...] = ("aimed", "rest")
 #: The collar mode of every reader and command that is not told one.
-DEFAULT_COLLARS = "aimed"
+DEFAULT_COLLARS = "rest"
 
 _CHANNEL = re.compile(r"^([xyz])(position|rotation)$", re.IGNORECASE)
 _FLOAT = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
