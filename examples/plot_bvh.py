@@ -1,6 +1,7 @@
 """Contact sheet of BVH motion captures retargeted to SMPL: a few frames of each clip on the
 default body, with the BVH skeleton drawn over it (black lines, dots at the mapped joints); the
-shoulders are opened where the arms would pass through the trunk (``load_bvh``'s default).
+shoulders are opened where the arms would pass through the trunk and the collars turn from the
+rest (``load_bvh``'s defaults).
 
 Run: ``python examples/plot_bvh.py [-o docs/mocap.png] [FILE.bvh ...]`` (default: CMU clips
 131_01 and 131_03 from ``/work/shared/mocap``).

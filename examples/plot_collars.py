@@ -1,7 +1,7 @@
 """Front view of a CMU capture on the default body with the collars aimed along the BVH's
-(``import-bvh``'s default: the shoulders shrugged) and turned from SMPL's rest collars
-(``--collars rest``), beside SMPL's rest (``docs/mocap.md``, "The collars: aimed or from the
-rest").
+(``--collars aimed``: the shoulders shrugged) and turned from SMPL's rest collars
+(``--collars rest``, ``import-bvh``'s default), beside SMPL's rest (``docs/mocap.md``, "The
+collars: aimed or from the rest").
 
 Run: ``python examples/plot_collars.py [BVH] [FRAME] [-o docs/collars.png]`` (default: the
 T-pose frame 0 and frame 200 of ``examples/mocap/cmu_14_04.bvh.xz``).
@@ -35,7 +35,7 @@ def main() -> None:
     args = parser.parse_args()
     body = load_body_model()
     frames = (0, args.frame + 1)
-    before, _ = load_bvh(args.bvh, body, frames=frames, arm_clearance=None)  # collars aimed
+    before, _ = load_bvh(args.bvh, body, frames=frames, arm_clearance=None, collars="aimed")
     now, _ = load_bvh(args.bvh, body, frames=frames, arm_clearance=None, collars="rest")
     cells = [
         (np.zeros((24, 3)), "SMPL rest"),
