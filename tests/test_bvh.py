@@ -365,6 +365,11 @@ def test_elbow_bend_and_random_poses_keep_bone_directions(body_model: BodyModel)
     errors = bone_errors(clip, motion, info, body_model)
     for bone in EXACT_BONES:
         assert errors[bone].max() < 1e-3, (bone, errors[bone])
+    aimed, info = retarget(clip, body_model, floor="capture", arm_clearance=None,
+                           collars="aimed")  # fmt: skip
+    errors = bone_errors(clip, aimed, info, body_model)
+    for bone in (*EXACT_BONES, *AIMED_BONES):
+        assert errors[bone].max() < 1e-3, (bone, errors[bone])
     joints = posed_joints(body_model, motion)
     upper = joints[:, J["left_elbow"]] - joints[:, J["left_shoulder"]]
     fore = joints[:, J["left_wrist"]] - joints[:, J["left_elbow"]]
