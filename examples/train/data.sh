@@ -1,9 +1,8 @@
 #!/usr/bin/env bash
 # The training data of a shipped model (the T-shirt's version 8; the dress's version 9 with
-# COLLARS=aimed, below), made
-# from nothing with the current simulator: the four extra CMU captures imported, the simulated
-# sets, and the canonical sets its training reads (docs/learning.md, "The dress's data in one
-# command").
+# COLLARS=aimed, below), made from nothing with the current simulator: the four extra CMU
+# captures imported, the simulated sets, and the canonical sets its training reads
+# (docs/learning.md, "The dress's data in one command").
 #
 #   bash examples/train/data.sh tshirt|dress [OUT]    # OUT: scratch by default
 #
