@@ -1,4 +1,5 @@
-"""``usd-garment import-bvh``: BVH motion captures (CMU, Mixamo) retargeted to USD body layers."""
+"""``usd-garment import-bvh``: BVH (CMU, Mixamo) and ASF/AMC motion captures retargeted to USD body
+layers."""
 
 from __future__ import annotations
 
@@ -81,7 +82,10 @@ def import_bvh(
     as_json: bool,
 ) -> None:
     """Retarget a BVH motion capture (CMU, Mixamo or SMPL joint names; .bvh, or compressed
-    .bvh.xz / .bvh.gz) to the SMPL skeleton and write it as a USD body layer (Y-up, metres)."""
+    .bvh.xz / .bvh.gz) to the SMPL skeleton and write it as a USD body layer (Y-up, metres).
+
+    Also reads ASF/AMC captures (the CMU database's own format: .amc, .amc.xz, .amc.gz, with
+    SUBJECT.asf or the folder's only .asf beside SUBJECT_TRIAL.amc), at 120 fps."""
     frame_range, beta_values = parse_frames(frames), parse_betas(betas)
     with user_errors():
         if not bvh.is_file():

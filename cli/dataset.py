@@ -117,8 +117,9 @@ def dataset() -> None:
     "captures",
     multiple=True,
     metavar="FILE:SPLIT",
-    help="A real motion (.bvh, .bvh.xz or .bvh.gz, an AMASS .npz or a USD body layer) and its "
-    "split (train, validation or test), played whole; repeat for several.",
+    help="A real motion (.bvh, .bvh.xz or .bvh.gz; .amc with its .asf beside it; an AMASS .npz "
+    "or a USD body layer) and its split (train, validation or test), played whole; repeat for "
+    "several.",
 )
 @click.option(
     "--capture-shapes",

@@ -36,16 +36,12 @@ Retargeting works on world (global) rotations, so BVH joints that SMPL lacks (CM
 
 from __future__ import annotations
 
-import gzip
-import lzma
 import math
 import re
-import zlib
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from itertools import pairwise
 from pathlib import Path
-from typing import IO
 
 import numpy as np
 import torch
@@ -55,6 +51,8 @@ from usd_garment.body.betas import MAX_ABS_BETA, as_betas
 from usd_garment.body.joints import NUM_JOINTS, SMPL_JOINT_NAMES, SMPL_PARENTS
 from usd_garment.body.model import BodyModel
 from usd_garment.motion.amass import ZUP_TO_YUP, rest_pelvis
+from usd_garment.motion.asf_amc import is_amc_path, read_amc
+from usd_garment.motion.capture_clip import BvhClip, BvhError, BvhSkeleton, has_suffix, read_text
 from usd_garment.motion.procedural import open_shoulders, turn_shoulders
 from usd_garment.motion.resample import resample_motion
 from usd_garment.motion.sequence import SmplMotion
@@ -135,77 +133,6 @@ _CHANNEL = re.compile(r"^([xyz])(position|rotation)$", re.IGNORECASE)
 _FLOAT = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 
 
-class BvhError(ValueError):
-    """A BVH file that cannot be read or retargeted."""
-
-
-@dataclass
-class BvhSkeleton:
-    """The HIERARCHY of a BVH file, joints in file (depth-first) order, parents first.
-
-    Attributes:
-        names: ``J`` joint names as written (``mixamorig:Hips``).
-        parents: ``(J,)`` parent index, −1 for the root.
-        offsets: ``(J, 3)`` OFFSET of each joint from its parent (file units).
-        channels: per joint, its channel names as written (``Zrotation``, ``Xposition`` ...).
-        end_sites: ``(J, 3)`` OFFSET of each joint's End Site (file units), NaN where none.
-    """
-
-    names: list[str]
-    parents: np.ndarray
-    offsets: np.ndarray
-    channels: list[tuple[str, ...]]
-    end_sites: np.ndarray
-
-    @property
-    def num_joints(self) -> int:
-        return len(self.names)
-
-    @property
-    def num_channels(self) -> int:
-        return sum(len(c) for c in self.channels)
-
-    def children(self, joint: int) -> list[int]:
-        """Indices of the joints whose parent is ``joint``."""
-        return [int(i) for i in np.flatnonzero(self.parents == joint)]
-
-    def path(self, ancestor: int, joint: int) -> list[int] | None:
-        """Joints from ``ancestor`` down to ``joint``, both included; None if not below it."""
-        chain = [joint]
-        while chain[-1] != ancestor:
-            parent = int(self.parents[chain[-1]])
-            if parent < 0:
-                return None
-            chain.append(parent)
-        return chain[::-1]
-
-
-@dataclass
-class BvhClip:
-    """A parsed BVH file.
-
-    Attributes:
-        skeleton: the HIERARCHY.
-        values: ``(T, C)`` float64 channel values per frame, in the file's channel order
-            (positions in file units, rotations in degrees).
-        frame_time: seconds per frame.
-    """
-
-    skeleton: BvhSkeleton
-    values: np.ndarray
-    frame_time: float
-
-    @property
-    def num_frames(self) -> int:
-        return int(self.values.shape[0])
-
-    @property
-    def fps(self) -> float:
-        """Frames per second, rounded to a whole number when within 0.05 of one (0.008333 s)."""
-        rate = 1.0 / self.frame_time
-        return float(round(rate)) if abs(rate - round(rate)) < 0.05 else rate
-
-
 @dataclass
 class BvhRetarget:
     """How a BVH skeleton maps onto SMPL, besides the motion itself.
@@ -268,21 +195,14 @@ class BvhRetarget:
 # Parsing
 
 
-#: A compressed format: its name, its reader and the errors that a broken file raises.
-Compression = tuple[str, Callable[..., IO[bytes]], tuple[type[Exception], ...]]
-#: Compressed BVH files :func:`read_bvh` opens, by their last suffix (``walk.bvh.xz``).
-COMPRESSED_SUFFIXES: dict[str, Compression] = {
-    ".xz": ("xz", lzma.open, (lzma.LZMAError, EOFError)),
-    ".gz": ("gzip", gzip.open, (gzip.BadGzipFile, zlib.error, EOFError)),
-}
-
-
 def is_bvh_path(path: str | Path) -> bool:
     """Whether ``path`` names a BVH file by its suffix: ``.bvh``, or ``.bvh.xz`` / ``.bvh.gz``."""
-    suffixes = [s.lower() for s in Path(path).suffixes]
-    if suffixes and suffixes[-1] in COMPRESSED_SUFFIXES:
-        suffixes = suffixes[:-1]
-    return bool(suffixes) and suffixes[-1] == ".bvh"
+    return has_suffix(path, ".bvh")
+
+
+def is_capture_path(path: str | Path) -> bool:
+    """Whether ``path`` names a capture :func:`load_bvh` reads: BVH or AMC, by its suffix."""
+    return is_bvh_path(path) or is_amc_path(path)
 
 
 def read_bvh(path: str | Path) -> BvhClip:
@@ -294,22 +214,7 @@ def read_bvh(path: str | Path) -> BvhClip:
             section with missing or non-finite values.
         OSError: the file cannot be read.
     """
-    path = Path(path)
-    compression = COMPRESSED_SUFFIXES.get(path.suffix.lower())
-    if compression is not None:
-        name, opener, errors = compression
-        try:
-            with opener(path, "rb") as stream:
-                data = stream.read()
-        except errors as exc:
-            raise BvhError(f"{path}: not a valid {name}-compressed file ({exc})") from None
-    else:
-        data = path.read_bytes()
-    try:
-        text = data.decode("utf-8-sig")
-    except UnicodeDecodeError:
-        raise BvhError(f"{path}: not a BVH file (not text)") from None
-    return parse_bvh(text, str(path))
+    return parse_bvh(read_text(path, "BVH"), str(path))
 
 
 def parse_bvh(text: str, source: str = "<bvh>") -> BvhClip:
@@ -1044,10 +949,11 @@ def load_bvh(
     arm_clearance: float | None = ARM_CONTACT_CLEARANCE,
     collars: str = DEFAULT_COLLARS,
 ) -> tuple[SmplMotion, BvhRetarget]:
-    """Read a BVH file as an SMPL motion on ``body`` (Y-up, metres), optionally resampled.
+    """Read a BVH capture (or an ASF/AMC one: :mod:`usd_garment.motion.asf_amc`) as an SMPL
+    motion on ``body`` (Y-up, metres), optionally resampled.
 
     Args:
-        path: the ``.bvh`` file.
+        path: the ``.bvh`` file (or ``.amc``, its ``.asf`` skeleton beside it: ``find_asf``).
         body: see :func:`retarget`.
         fps: resample to this frame rate (slerp / lerp); the file's rate by default.
         betas, units, scale, up_axis, floor, frames, arm_clearance, collars: see
@@ -1058,7 +964,7 @@ def load_bvh(
         BvhError: see :func:`read_bvh` and :func:`retarget`.
         OSError: the file cannot be read.
     """
-    clip = read_bvh(path)
+    clip = read_amc(path) if is_amc_path(path) else read_bvh(path)
     try:
         motion, info = retarget(
             clip, body, betas, units=units, scale=scale, up_axis=up_axis, floor=floor,

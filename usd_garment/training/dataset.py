@@ -76,8 +76,9 @@ class DatasetConfig:
         open_shoulders: procedural motions open the shoulders to keep the arms clear of the
             torso (off: arms hang against the trunk as in capture).
         captures: real motions, ``(path, split)`` pairs: a BVH file (``.bvh``, ``.bvh.xz``,
-            ``.bvh.gz``), an AMASS ``.npz`` or a USD body layer, simulated on the first
-            ``capture_shapes`` shapes, whole, resampled to ``fps``.
+            ``.bvh.gz``) or an AMC one (its ASF beside it), an AMASS ``.npz`` or a USD body
+            layer, simulated on the first ``capture_shapes`` shapes, whole, resampled to
+            ``fps``.
         capture_shapes: how many of the shapes each capture is simulated on.
         train_only: every procedural motion goes to the train split (more training data for a
             model whose held-out motions come from another dataset); captures keep theirs.
