@@ -16,6 +16,7 @@ import torch
 from click.testing import CliRunner
 from scipy.spatial.transform import Rotation
 
+from tests.script_calls import ROOT, script_calls
 from usd_garment.body.model import BodyModel
 from usd_garment.cli.main import main
 from usd_garment.motion.asf_amc import (
@@ -25,6 +26,7 @@ from usd_garment.motion.asf_amc import (
     is_amc_path,
     parse_amc,
     parse_asf,
+    read_amc,
 )
 from usd_garment.motion.bvh import forward_kinematics, load_bvh
 from usd_garment.motion.motion_file import read_motion_file
@@ -175,3 +177,35 @@ def test_bad_input_gives_one_line_and_no_output(
     assert message.startswith("Error:") and "\n" not in message, message
     assert expected in message, message
     assert {p: p.read_bytes() for p in tmp_path.iterdir()} == before  # input untouched, no output
+
+
+def test_the_amc_data_script(tmp_path: Path) -> None:
+    """``examples/train/data_amc.sh tshirt OUT BASE`` imports the four subject-02 captures of
+    ``examples/mocap/asf`` (frames inside each file: 1,846 at 30 fps, as ``docs/learning.md``
+    says), makes the train-only set amc4 of them, and projects it onto copies of BASE's two
+    canonical sets."""
+    base = tmp_path / "base"
+    base.mkdir()
+    for name in ("v4c", "v4cs"):
+        (base / f"canonical_tshirt_{name}.npz").write_text(name)
+    calls = script_calls("data_amc.sh", "tshirt", "scratch/amc", str(base), tmp_path=tmp_path)
+    imports = [a for a in calls if a[0] == "import-bvh"]
+    names = [Path(a[1]).name for a in imports]
+    assert names == [f"02_{n}.amc.xz" for n in ("05", "06", "07", "10")]
+    assert all(a[a.index("--collars") + 1] == "rest" for a in imports)
+    frames = 0
+    for a in imports:
+        first, end = (int(v) for v in a[a.index("--frames") + 1].split(":"))
+        clip = read_amc(ROOT / a[1])
+        assert 0 <= first < end <= clip.num_frames
+        frames += len(range(first, end, 4))  # 120 fps to 30
+    assert frames == 1846
+    (make,) = [a for a in calls if a[:2] == ["dataset", "make"]]
+    captured = [make[i + 1] for i, w in enumerate(make) if w == "--capture"]
+    assert captured == [f"{a[a.index('-o') + 1]}:train" for a in imports]
+    assert make[make.index("--motions") + 1] == "0" and make[make.index("--shapes") + 1] == "1"
+    projected = [a[a.index("-o") + 1] for a in calls if a[0] == "project"]
+    assert projected == [f"scratch/amc/canonical_tshirt_{n}.npz" for n in ("v4c", "v4cs")]
+    for name in ("v4c", "v4cs"):
+        copy = tmp_path / "work" / "scratch" / "amc" / f"canonical_tshirt_{name}.npz"
+        assert copy.read_text() == name  # BASE's file, copied before the projection
