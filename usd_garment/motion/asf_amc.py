@@ -35,7 +35,14 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from usd_garment.motion.capture_clip import BvhClip, BvhError, BvhSkeleton, has_suffix, read_text
+from usd_garment.motion.capture_clip import (
+    BvhClip,
+    BvhError,
+    BvhSkeleton,
+    has_suffix,
+    parse_floats,
+    read_text,
+)
 
 #: Frames per second of AMC files, which do not say (the CMU database's rate).
 AMC_FPS = 120.0
@@ -359,10 +366,4 @@ def _numbers(words: list[str], count: int | None, where: str) -> np.ndarray:
     """``words`` as finite float64 numbers (``count`` of them where given)."""
     if count is not None and len(words) != count:
         raise BvhError(f"{where}: expected {count} numbers")
-    try:
-        vec = np.asarray([float(w) for w in words], dtype=np.float64)
-    except ValueError:
-        raise BvhError(f"{where}: expected numbers") from None
-    if not np.isfinite(vec).all():
-        raise BvhError(f"{where}: NaN or infinite value")
-    return vec
+    return parse_floats(words, where)

@@ -52,7 +52,14 @@ from usd_garment.body.joints import NUM_JOINTS, SMPL_JOINT_NAMES, SMPL_PARENTS
 from usd_garment.body.model import BodyModel
 from usd_garment.motion.amass import ZUP_TO_YUP, rest_pelvis
 from usd_garment.motion.asf_amc import is_amc_path, read_amc
-from usd_garment.motion.capture_clip import BvhClip, BvhError, BvhSkeleton, has_suffix, read_text
+from usd_garment.motion.capture_clip import (
+    BvhClip,
+    BvhError,
+    BvhSkeleton,
+    has_suffix,
+    parse_floats,
+    read_text,
+)
 from usd_garment.motion.procedural import open_shoulders, turn_shoulders
 from usd_garment.motion.resample import resample_motion
 from usd_garment.motion.sequence import SmplMotion
@@ -285,7 +292,7 @@ def _parse_hierarchy(statements: list[tuple[int, list[str]]], source: str) -> Bv
         elif key == "OFFSET":
             if not stack or pending is not None or len(words) != 4:
                 raise BvhError(f"{where}: bad OFFSET")
-            vec = _floats(words[1:], where)
+            vec = parse_floats(words[1:], where)
             if stack[-1] == -2:
                 end_sites[stack[-2]] = vec
             else:
@@ -328,16 +335,6 @@ def _channels(words: list[str], where: str) -> tuple[str, ...]:
     if len(set(positions)) != len(positions):
         raise BvhError(f"{where}: a position channel appears twice")
     return names
-
-
-def _floats(words: Sequence[str], where: str) -> np.ndarray:
-    try:
-        vec = np.asarray([float(w) for w in words], dtype=np.float64)
-    except ValueError:
-        raise BvhError(f"{where}: expected numbers") from None
-    if not np.isfinite(vec).all():
-        raise BvhError(f"{where}: NaN or infinite value")
-    return vec
 
 
 def _skip_blank(lines: list[str], row: int) -> int:

@@ -8,7 +8,7 @@ from __future__ import annotations
 import gzip
 import lzma
 import zlib
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
@@ -128,3 +128,19 @@ def read_text(path: str | Path, kind: str) -> str:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError:
         raise BvhError(f"{path}: not a {kind} file (not text)") from None
+
+
+def parse_floats(words: Sequence[str], where: str) -> np.ndarray:
+    """``words`` as finite float64 numbers ``(len(words),)``; ``where`` (``file:line``) prefixes
+    the error.
+
+    Raises:
+        BvhError: a word that is not a number, or NaN or infinity.
+    """
+    try:
+        vec = np.asarray([float(w) for w in words], dtype=np.float64)
+    except ValueError:
+        raise BvhError(f"{where}: expected numbers") from None
+    if not np.isfinite(vec).all():
+        raise BvhError(f"{where}: NaN or infinite value")
+    return vec
