@@ -443,12 +443,19 @@ def test_the_data_script_makes_the_committed_sets(garment: str, tmp_path: Path) 
     assert projected == first + then
 
 
-def test_the_data_script_takes_the_collars(tmp_path: Path) -> None:
-    """``bash examples/train/data.sh tshirt``: by default the captures imported and every set
-    made with ``--collars rest``, as the T-shirt's version 8 sets of stop 55 were
-    (``docs/datasets/tshirt_NAME_rest_stop55_manifest.json``)."""
-    calls = script_calls("data.sh", "tshirt", tmp_path=tmp_path)
+@pytest.mark.parametrize(
+    ("garment", "suffix", "sets"),
+    [("tshirt", "_rest_stop55", ["v4", "v4x", "cmu4", "v5s"]),
+     ("dress", "_rest_stop59", ["v4", "v4x", "cmu4", "v5s", "v6s"])],
+)  # fmt: skip
+def test_the_data_script_takes_the_collars(
+    garment: str, suffix: str, sets: list[str], tmp_path: Path
+) -> None:
+    """``bash examples/train/data.sh GARMENT``: by default the captures imported and every set
+    made with ``--collars rest``, as the T-shirt's version 8 sets of stop 55 and the dress's
+    version 10 sets of stop 59 were (``docs/datasets/GARMENT_NAME{suffix}_manifest.json``)."""
+    calls = script_calls("data.sh", garment, tmp_path=tmp_path)
     kinds = [a for a in calls if a[0] == "import-bvh" or a[:2] == ["dataset", "make"]]
-    assert len(kinds) == 8
+    assert len(kinds) == 4 + len(sets)
     assert all(a[a.index("--collars") + 1] == "rest" for a in kinds)
-    assert _sets_made_as_committed(calls, "tshirt", "_rest_stop55") == ["v4", "v4x", "cmu4", "v5s"]
+    assert _sets_made_as_committed(calls, garment, suffix) == sets
