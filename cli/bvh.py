@@ -56,9 +56,9 @@ from usd_garment.usd.garment_layer import check_outputs
     help="Keep the captured bone directions of the arms (same as --arm-clearance 0).",
 )  # fmt: skip
 @collars_option(
-    "rest: the collars turn from the body's rest collars (the shipped T-shirt's training); "
+    "rest: the collars turn from the body's rest collars (the shipped models' training); "
     "aimed: the collar bones along the capture's (CMU captures come out shrugged, as the "
-    "shipped dress was trained; docs/mocap.md)."
+    "T-shirt's version 7 and the dress's version 9 were trained; docs/mocap.md)."
 )
 @click.option("--betas", default=None, help="Shape coefficients of the body (default zero).")
 @body_model_option

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# The training data of a shipped model (the T-shirt's version 8; the dress's version 9 with
-# COLLARS=aimed, below), made from nothing with the current simulator: the four extra CMU
+# The training data of a shipped model (the T-shirt's version 8, the dress's version 10; with
+# COLLARS=aimed, below, version 7's and version 9's), made from nothing with the current simulator: the four extra CMU
 # captures imported, the simulated sets, and the canonical sets its training reads
 # (docs/learning.md, "The dress's data in one command").
 #
@@ -16,14 +16,14 @@
 # the T-shirt's v5s then took 14.5 minutes, about 2.5 times as fast as before on the same
 # machine (docs/simulation.md, "Training data").
 #
-# Each set can be held to its newest committed manifest (T-shirt, rest collars: *_rest_stop55;
-# aimed: dress *_stop41, v5s *_stop40; T-shirt v4 and v4x *_stop42, cmu4 and v5s *_stop43):
+# Each set can be held to its newest committed manifest (rest collars: T-shirt *_rest_stop55,
+# dress *_rest_stop59; aimed: dress *_stop41, v5s *_stop40; T-shirt v4 and v4x *_stop42, cmu4 and v5s *_stop43):
 # usd-garment dataset compare docs/datasets/GARMENT_NAME_..._manifest.json OUT/dataset_GARMENT_NAME
 #
 # COLLARS (rest by default, as `import-bvh`) is how the captures are imported and simulated:
 # rest, the collars from the body's rest collars (no shrug: docs/mocap.md), made the T-shirt's
-# version 8 data (stops 55-58); COLLARS=aimed the T-shirt's version 7 and the
-# dress's version 9 data. Give each its own OUT: imports already in OUT are kept.
+# version 8 data (stops 55-58) and the dress's version 10 data (stop 59); COLLARS=aimed the
+# T-shirt's version 7 and the dress's version 9 data. Give each its own OUT: imports already in OUT are kept.
 #
 #   canonical_GARMENT_v4c.npz      v4 + v4x + cmu4: the members' VAEs and pose codes
 #   canonical_tshirt_v4cs.npz      v4c + v5s: the T-shirt's regressors

@@ -12,6 +12,7 @@
 #                                → tshirt_J (λ 1.5, 60 epochs); no latent smoothing
 #   dress (version 9, stop 39):  dress_D30 → dress_L0 on v4css → dress_L (λ 7.7, 30 epochs);
 #                                0.1 s latent smoothing
+#   (the T-shirt's version 8 and the dress's version 10: the same recipes on the rest sets)
 # The run folders go to RUNS/GARMENT_STEP_m{0,1,2} (RUNS: scratch/runs, which the settings'
 # init_from name); a step whose run folder holds its result is skipped, so an interrupted run
 # goes on where it stopped. Run it from the repository root. DEVICE=cuda trains on a GPU; VERSION

@@ -129,9 +129,9 @@ REST_RELATIVE: tuple[str, ...] = ("left_collar", "right_collar")
 #: rises by about 22° where SMPL's falls by 8°, and aimed along it SMPL's collars turn up by
 #: 22–35° in every frame, the shoulder joints 6–9 cm higher along the chest than in SMPL's rest
 #: (a shrug). ``"rest"`` (the default since stop 59) turns them from SMPL's rest collars
-#: (:data:`REST_RELATIVE`): the body the capture shows. The T-shirt from version 8 on was trained
-#: on ``"rest"`` captures; the dress's version 9 and the T-shirt's version 7 on ``"aimed"`` ones
-#: (``docs/mocap.md``, "The collars").
+#: (:data:`REST_RELATIVE`): the body the capture shows. The T-shirt from version 8 on and the dress
+#: from version 10 on were trained on ``"rest"`` captures; the dress's version 9 and the T-shirt's
+#: version 7 on ``"aimed"`` ones (``docs/mocap.md``, "The collars").
 COLLAR_MODES: tuple[str, ...] = ("aimed", "rest")
 #: The collar mode of every reader and command that is not told one.
 DEFAULT_COLLARS = "rest"
