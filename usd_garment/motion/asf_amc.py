@@ -69,7 +69,8 @@ _EULER = "ZYX"
 class _Bone:
     """One ASF bone: ``direction`` ``(3,)`` unit vector and ``length`` (file units) of its
     segment in the rest frame, ``axis`` ``(3, 3)`` its local frame ``C``, ``dofs`` its
-    channels (``("rx", "rz")``; the root's ``("tx", ..., "rz")``)."""
+    channels (``("rx", "rz")``; the root's ``("tx", ..., "rz")``), ``position`` ``(3,)`` the
+    root's rest position (file units; zero for the other bones)."""
 
     name: str
     direction: np.ndarray = field(default_factory=lambda: np.zeros(3))

@@ -17,12 +17,13 @@ import numpy as np
 
 
 class BvhError(ValueError):
-    """A BVH file that cannot be read or retargeted."""
+    """A capture (BVH, or ASF/AMC) that cannot be read or retargeted."""
 
 
 @dataclass
 class BvhSkeleton:
-    """The HIERARCHY of a BVH file, joints in file (depth-first) order, parents first.
+    """The HIERARCHY of a BVH file (or an ASF skeleton laid out as one), joints in file
+    (depth-first) order, parents first.
 
     Attributes:
         names: ``J`` joint names as written (``mixamorig:Hips``).
@@ -63,7 +64,7 @@ class BvhSkeleton:
 
 @dataclass
 class BvhClip:
-    """A parsed BVH file.
+    """A parsed capture: a BVH file, or an ASF/AMC pair laid out as one (``asf_amc``).
 
     Attributes:
         skeleton: the HIERARCHY.
