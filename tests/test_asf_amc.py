@@ -162,9 +162,13 @@ def _no_asf(tmp: Path) -> Path:
         (lambda t: _copy(t, asf="hello\n"), "not an ASF file"),
         (lambda t: _copy(t, asf=ASF.read_text().replace("root lhipjoint", "root")),
          "bones outside the hierarchy: lhipjoint"),
+        (lambda t: _copy(t, asf=ASF.read_text().replace("TX TY TZ", "TX TY TW")),
+         "unknown or repeated degree of freedom in 'TX TY TW RX RY RZ'"),
+        (lambda t: _copy(t, asf=ASF.read_text().replace("dof rx ry rz", "dof rx rx rz", 1)),
+         "unknown or repeated degree of freedom in 'rx rx rz'"),
     ],
     ids=["no-asf", "unknown-bone", "value-count", "missing-bone", "nan", "no-frames",
-         "not-asf", "orphan"],
+         "not-asf", "orphan", "root-order", "repeated-dof"],
 )  # fmt: skip
 def test_bad_input_gives_one_line_and_no_output(
     tmp_path: Path, make: Callable[[Path], Path], expected: str

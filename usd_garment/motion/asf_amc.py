@@ -63,6 +63,8 @@ CMU_BVH_NAMES: dict[str, str] = {
 
 #: The rotation channels of the clip's joints, in BVH's convention (intrinsic, degrees).
 _EULER = "ZYX"
+#: The degrees of freedom an ASF bone (or its root) may name.
+_DOF_NAMES = ("rx", "ry", "rz", "tx", "ty", "tz")
 
 
 @dataclass
@@ -150,7 +152,7 @@ def parse_asf(text: str, source: str = "<asf>") -> AsfSkeleton:
     for row, words in sections.get(":root", []):
         key = words[0].lower()
         if key == "order":
-            root.dofs = tuple(w.lower() for w in words[1:])
+            root.dofs = _dofs(words[1:], f"{source}:{row}")
         elif key == "axis" and len(words) == 2:
             root_axis = words[1]
         elif key == "position":
@@ -346,12 +348,18 @@ def _bone_blocks(lines: list[tuple[int, list[str]]], degrees: bool, source: str)
         elif key == "axis":
             bone.axis = _frame(_numbers(words[1:4], 3, where), "".join(words[4:5]), degrees, where)
         elif key == "dof":
-            bone.dofs = tuple(w.lower() for w in words[1:])
-            if not all(d in ("rx", "ry", "rz", "tx", "ty", "tz") for d in bone.dofs):
-                raise BvhError(f"{where}: unknown degree of freedom in '{' '.join(words[1:])}'")
+            bone.dofs = _dofs(words[1:], where)
     if bone is not None:
         raise BvhError(f"{source}: a bone without its 'end'")
     return bones
+
+
+def _dofs(words: list[str], where: str) -> tuple[str, ...]:
+    """A bone's ``dof`` (or the root's ``order``) words, lower-case, each ``rx`` … ``tz`` once."""
+    dofs = tuple(w.lower() for w in words)
+    if not all(d in _DOF_NAMES for d in dofs) or len(set(dofs)) != len(dofs):
+        raise BvhError(f"{where}: unknown or repeated degree of freedom in '{' '.join(words)}'")
+    return dofs
 
 
 def _frame(angles: np.ndarray, order: str, degrees: bool, where: str) -> np.ndarray:
