@@ -3,8 +3,10 @@ default body, with the BVH skeleton drawn over it (black lines, dots at the mapp
 shoulders are opened where the arms would pass through the trunk and the collars turn from the
 rest (``load_bvh``'s defaults).
 
-Run: ``python examples/plot_bvh.py [-o docs/mocap.png] [FILE.bvh ...]`` (default: CMU clips
-131_01 and 131_03 from ``/work/shared/mocap``).
+Run: ``python examples/plot_bvh.py [-o docs/mocap.png] [FILE.bvh|FILE.amc ...]`` (default: CMU
+clips 131_01 and 131_03 from ``/work/shared/mocap``); ``docs/mocap_amc.png``:
+``python examples/plot_bvh.py -o docs/mocap_amc.png examples/mocap/asf/02_05.amc.xz
+examples/mocap/asf/02_10.amc.xz``.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ import torch
 
 from usd_garment.body import load_body_model
 from usd_garment.eval.render import SKIN, draw_meshes, view_axes
-from usd_garment.motion.bvh import load_bvh, map_joints, read_bvh, up_rotation, world_motion
+from usd_garment.motion.bvh import load_bvh, map_joints, read_capture, up_rotation, world_motion
 
 MOCAP = Path("/work/shared/mocap")
 CLIPS = (MOCAP / "cmu_131_01.bvh", MOCAP / "cmu_131_03.bvh")
@@ -44,7 +46,7 @@ def main() -> None:
     )
     for row, (path, (view_name, view_deg)) in enumerate(rows):
         motion, info = load_bvh(path, body, fps=FPS)
-        clip = read_bvh(path)
+        clip = read_capture(path)
         mapping = map_joints(clip.skeleton)
         frames = np.linspace(0, motion.num_frames - 1, COLUMNS).round().astype(int)
         source = np.minimum(

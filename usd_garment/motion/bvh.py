@@ -207,6 +207,17 @@ def is_bvh_path(path: str | Path) -> bool:
     return has_suffix(path, ".bvh")
 
 
+def read_capture(path: str | Path) -> BvhClip:
+    """The capture at ``path``: a BVH file (:func:`read_bvh`) or an AMC one, its ASF found beside
+    it (:func:`usd_garment.motion.asf_amc.read_amc`), by its name.
+
+    Raises:
+        BvhError: see :func:`read_bvh` and ``read_amc``.
+        OSError: a file cannot be read.
+    """
+    return read_amc(path) if is_amc_path(path) else read_bvh(path)
+
+
 def is_capture_path(path: str | Path) -> bool:
     """Whether ``path`` names a capture :func:`load_bvh` reads: BVH or AMC, by its suffix."""
     return is_bvh_path(path) or is_amc_path(path)
@@ -961,7 +972,7 @@ def load_bvh(
         BvhError: see :func:`read_bvh` and :func:`retarget`.
         OSError: the file cannot be read.
     """
-    clip = read_amc(path) if is_amc_path(path) else read_bvh(path)
+    clip = read_capture(path)
     try:
         motion, info = retarget(
             clip, body, betas, units=units, scale=scale, up_axis=up_axis, floor=floor,
