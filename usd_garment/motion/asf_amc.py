@@ -85,12 +85,12 @@ class _Bone:
 @dataclass
 class AsfSkeleton:
     """A parsed ASF file: ``bones`` by name (the root first, named ``root``), each bone's
-    ``children`` in the order ``:hierarchy`` lists them, and whether its angles are in
-    degrees."""
+    ``children`` in the order ``:hierarchy`` lists them, and each bone's ``parent`` (all but the
+    root's). Angles are in the bones' frames already (``axis``), whatever the file's unit."""
 
     bones: dict[str, _Bone]
     children: dict[str, list[str]]
-    degrees: bool
+    parent: dict[str, str]
 
 
 def is_amc_path(path: str | Path) -> bool:
@@ -181,7 +181,7 @@ def parse_asf(text: str, source: str = "<asf>") -> AsfSkeleton:
     orphans = [name for name in bones if name != "root" and name not in parent_of]
     if orphans:
         raise BvhError(f"{source}: bones outside the hierarchy: {', '.join(orphans)}")
-    return AsfSkeleton(bones, children, degrees)
+    return AsfSkeleton(bones, children, parent_of)
 
 
 def parse_amc(text: str, skeleton: AsfSkeleton, source: str = "<amc>") -> dict[str, np.ndarray]:
@@ -246,11 +246,10 @@ def asf_clip(skeleton: AsfSkeleton, values: dict[str, np.ndarray]) -> BvhClip:
         order.append(name)
         stack.extend(reversed(skeleton.children[name]))
     index = {name: i for i, name in enumerate(order)}
-    frames = next(iter(values.values())).shape[0] if values else 1
     parents, offsets, ends, channels, columns = [], [], [], [], []
     for name in order:
         bone = skeleton.bones[name]
-        parent = next((p for p, c in skeleton.children.items() if name in c), None)
+        parent = skeleton.parent.get(name)
         parents.append(-1 if parent is None else index[parent])
         if parent is None:
             offsets.append(bone.position)
@@ -280,8 +279,7 @@ def asf_clip(skeleton: AsfSkeleton, values: dict[str, np.ndarray]) -> BvhClip:
     )
     if clip_skeleton.num_channels == 0:
         raise BvhError("the skeleton has no degrees of freedom")
-    table = np.stack(columns, axis=1) if columns else np.zeros((frames, 0))
-    return BvhClip(clip_skeleton, table, 1.0 / AMC_FPS)
+    return BvhClip(clip_skeleton, np.stack(columns, axis=1), 1.0 / AMC_FPS)
 
 
 def _local_euler(bone: _Bone, angles: np.ndarray, dofs: list[str]) -> np.ndarray:
