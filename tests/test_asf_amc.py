@@ -12,13 +12,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import torch
 from click.testing import CliRunner
 from scipy.spatial.transform import Rotation
 
 from tests.script_calls import ROOT, script_calls
 from usd_garment.body.model import BodyModel
 from usd_garment.cli.main import main
+from usd_garment.eval.evaluate import posed_body_vertices
 from usd_garment.motion.asf_amc import (
     AMC_FPS,
     asf_clip,
@@ -30,21 +30,12 @@ from usd_garment.motion.asf_amc import (
 )
 from usd_garment.motion.bvh import forward_kinematics, load_bvh
 from usd_garment.motion.motion_file import read_motion_file
-from usd_garment.motion.sequence import SmplMotion
 
 HERE = Path(__file__).parent
 AMC = HERE / "data" / "asf" / "02_01.amc"
 ASF = HERE / "data" / "asf" / "02.asf"
 #: The same capture in the database's BVH conversion, whose frame 0 is an added T-pose.
 BVH = HERE.parent / "examples" / "mocap" / "cmu_02_01.bvh.xz"
-
-
-def posed(body: BodyModel, motion: SmplMotion) -> np.ndarray:
-    """``(T, V, 3)`` posed vertices (m) of ``motion`` on the mean shape."""
-    pose = torch.as_tensor(np.asarray(motion.pose), dtype=torch.float32).reshape(-1, 24, 3)
-    trans = torch.as_tensor(np.asarray(motion.trans), dtype=torch.float32)
-    with torch.no_grad():
-        return body.forward(torch.zeros(10), pose, trans).vertices.numpy()
 
 
 @pytest.mark.parametrize("collars", ["rest", "aimed"])
@@ -55,7 +46,9 @@ def test_amc_capture_lands_as_its_bvh_conversion(body_model: BodyModel, collars:
     bvh, bvh_info = load_bvh(BVH, body_model, frames=(1, 41), collars=collars)
     assert amc.num_frames == bvh.num_frames == 40 and amc.fps == bvh.fps == AMC_FPS
     assert amc_info.units == bvh_info.units == "cmu" and amc_info.joint_map == bvh_info.joint_map
-    gap = np.linalg.norm(posed(body_model, amc) - posed(body_model, bvh), axis=-1)
+    gap = np.linalg.norm(
+        posed_body_vertices(body_model, amc) - posed_body_vertices(body_model, bvh), axis=-1
+    )
     assert gap.max() < 1e-5, gap.max()
 
 
