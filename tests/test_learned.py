@@ -487,6 +487,20 @@ def test_the_recipe_script_trains_the_first_steps_at_once(tmp_path: Path) -> Non
     assert at_once[3:] == [c for c in one_by_one if c[:2] != ["train", "all"]]
 
 
+def test_the_recipe_script_trains_only_the_members_named(tmp_path: Path) -> None:
+    """``MEMBERS="0" TRAIN_ARGS="--ablation no-collision" recipe.sh``: member 0's steps alone,
+    the ablation on each of them, and no join (a model needs all three members); the same
+    commands as member 0's in a whole run."""
+    for name in ("whole", "one"):
+        (tmp_path / name).mkdir()
+    env = {"TRAIN_ARGS": "--ablation no-collision"}
+    whole = script_calls("recipe.sh", "tshirt", "MODEL", tmp_path=tmp_path / "whole", env=env)
+    one = script_calls("recipe.sh", "tshirt", "MODEL", tmp_path=tmp_path / "one",
+                       env={**env, "MEMBERS": "0"})  # fmt: skip
+    assert one == [c for c in whole if c[c.index("--out") + 1].endswith("_m0")]
+    assert len(one) == 4 and all(c[c.index("--ablation") + 1] == "no-collision" for c in one)
+
+
 def test_a_failed_first_step_at_once_stops_the_other_members(tmp_path: Path) -> None:
     """``AT_ONCE=1 recipe.sh``: when one member's ``train all`` fails, the two still training
     are stopped and the recipe exits with an error, rather than waiting on them."""
