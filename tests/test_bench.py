@@ -15,12 +15,16 @@ from click.testing import CliRunner
 from usd_garment.body.model import BodyModel
 from usd_garment.cli.main import main
 from usd_garment.eval.bench import (
+    REFERENCE_LABEL,
     BenchInput,
     BenchMethod,
+    BenchRow,
+    chart_points,
     chart_table,
     load_report,
     pareto_front,
     run_bench,
+    simulated_rows,
 )
 from usd_garment.methods.budget import load_budget
 from usd_garment.methods.learned import shipped_model
@@ -225,3 +229,25 @@ def test_the_judge_script_benches_a_candidate_as_the_rules_did(
     (tmp_path / "aimed").mkdir()
     again = script_calls("judge.sh", *args, tmp_path=tmp_path / "aimed", env={"COLLARS": "aimed"})
     assert [c[c.index("--collars") + 1] for c in again if c[0] == "import-bvh"] == ["aimed"]
+
+
+def test_simulated_rows_pool_the_inputs_with_a_simulation_only() -> None:
+    """``simulated_rows``: the rows of the inputs whose reference simulation was read (the
+    paper's Table 1 pools its figures over these); an input without one, or whose reference
+    failed, is left out, so its collisions no longer weigh in the chart point."""
+
+    def row(name: str, label: str, share: float, error: str = "") -> BenchRow:
+        return BenchRow(name, label, label, "high", frames=10,
+                        summary={"inside_elsewhere_share": share}, error=error)  # fmt: skip
+
+    rows = [
+        row("walk", "lbs", 0.4),
+        row("run", "lbs", 0.1),
+        row("run", REFERENCE_LABEL, 0.0),
+        row("bad", "lbs", 0.9),
+        row("bad", REFERENCE_LABEL, 0.0, error="OSError: gone"),
+    ]
+    kept = simulated_rows(rows)
+    assert [(r.input, r.label) for r in kept] == [("run", "lbs"), ("run", REFERENCE_LABEL)]
+    (point,) = [p for p in chart_points(kept) if p.label == "lbs"]
+    assert point.frames == 10 and point.inside_elsewhere_share == pytest.approx(0.1)

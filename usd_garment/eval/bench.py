@@ -251,6 +251,14 @@ def chart_points(rows: Sequence[BenchRow]) -> list[ChartPoint]:
     return points
 
 
+def simulated_rows(rows: Sequence[BenchRow]) -> list[BenchRow]:
+    """The rows of the inputs that have a reference simulation (the frames every figure of the
+    paper's Table 1, error included, is measured on; an input without one adds collisions and
+    jitter but no error to a chart point)."""
+    simulated = {r.input for r in rows if r.label == REFERENCE_LABEL and not r.error}
+    return [r for r in rows if r.input in simulated]
+
+
 def chart_table(rows: Sequence[BenchRow]) -> str:
     """The chart points as a plain-text table (the paper's Table 1 with speed and error):
     shares in % of vertices, error and the whole garment's mean offset in mm, jitter as mean
