@@ -499,6 +499,12 @@ def test_the_recipe_script_trains_only_the_members_named(tmp_path: Path) -> None
                        env={**env, "MEMBERS": "0"})  # fmt: skip
     assert one == [c for c in whole if c[c.index("--out") + 1].endswith("_m0")]
     assert len(one) == 4 and all(c[c.index("--ablation") + 1] == "no-collision" for c in one)
+    for wrong in ("3", "0 0", "0 x"):  # a member that is not one of the three, or twice
+        (tmp_path / "wrong").mkdir()
+        with pytest.raises(subprocess.CalledProcessError):
+            script_calls("recipe.sh", "tshirt", "M", tmp_path=tmp_path / "wrong",
+                         env={"MEMBERS": wrong})  # fmt: skip
+        shutil.rmtree(tmp_path / "wrong")
 
 
 def test_a_failed_first_step_at_once_stops_the_other_members(tmp_path: Path) -> None:

@@ -26,7 +26,8 @@
 # once against 46 s one after another at two threads (stop 56), 1.5x the throughput; a member
 # whose first step fails stops the other two and the recipe. MEMBERS="0" trains only the members
 # named (e.g. an ablation of one member, TRAIN_ARGS="--ablation no-collision", against the shipped
-# member of the same seed: docs/judge.md); the members are joined only when all three are named.
+# member of the same seed: docs/learning.md, "The paper's Table 1 with the shipped recipe"); the
+# members are joined only when all three are named.
 set -euo pipefail
 # One compound command, read whole before it runs (see data.sh).
 {
@@ -50,6 +51,12 @@ read -r -a SEED_OF <<<"${SEEDS:-}"
     echo "recipe.sh: SEEDS names the three members' seeds, not '$SEEDS'" >&2; exit 2; }
 RUNS=${RUNS:-scratch/runs}
 read -r -a MEMBER_LIST <<<"${MEMBERS:-0 1 2}"
+seen=""
+for m in "${MEMBER_LIST[@]}"; do
+    [[ $m == [012] && $seen != *$m* ]] || {
+        echo "recipe.sh: MEMBERS names members 0, 1 and 2, each once, not '$MEMBERS'" >&2; exit 2; }
+    seen+=$m
+done
 HERE=$(dirname "$0")
 PLANES=$DATA/planes_canonical_${GARMENT}_$SET.npz
 mkdir -p "$RUNS"
@@ -115,8 +122,9 @@ for m in "${MEMBER_LIST[@]}"; do
     done
 done
 # name: the last step's, whose folders hold the members
-if [ "${MEMBER_LIST[*]}" != "0 1 2" ]; then
-    echo "recipe.sh: trained member(s) ${MEMBER_LIST[*]} in $RUNS/${GARMENT}_${name}_mM; joined only with MEMBERS=\"0 1 2\"" >&2
+if [ ${#MEMBER_LIST[@]} -ne 3 ]; then
+    echo "recipe.sh: trained member(s) ${MEMBER_LIST[*]} in $RUNS/${GARMENT}_${name}_mM;" \
+        "the members are joined only when all three are named" >&2
     exit
 fi
 usd-garment train combine "$RUNS/${GARMENT}_${name}"_m{0,1,2} --out "$MODEL" \
