@@ -134,13 +134,14 @@ def test_part_boxes_hold_their_parts(body_model: BodyModel) -> None:
     assert nonempty.tolist() == part.unique().tolist()
 
 
-@pytest.mark.parametrize("with_own", [True, False])
+@pytest.mark.parametrize(("with_own", "empty"), [(True, False), (False, False), (True, True)])
 def test_candidates_are_each_joints_rigid_guesses_in_its_box(
-    body_model: BodyModel, with_own: bool
+    body_model: BodyModel, with_own: bool, empty: bool
 ) -> None:
     """The rigid guesses made for every joint at once, a few frames at a time, are those made
     joint by joint: R_jᵀ(p − t_j) in j's box and (in the first pass, where the own preimages
-    are given) away from the vertex's own preimage, for the vertices the pass visits only."""
+    are given) away from the vertex's own preimage, for the vertices the pass visits only; a
+    joint whose box is empty (it dominates no vertex: here the spine's, emptied) gives none."""
     gen = torch.Generator().manual_seed(3)
     betas = torch.zeros(10)
     pose = 0.4 * torch.randn(11, 24, 3, generator=gen)
@@ -151,6 +152,10 @@ def test_candidates_are_each_joints_rigid_guesses_in_its_box(
     own = points + 0.05 * torch.randn(points.shape, generator=gen)
     visit = torch.rand(points.shape[:2], generator=gen) < 0.8
     boxes = PartBoxes.of(body_model, betas)
+    if empty:
+        lower, upper = boxes.lower.clone(), boxes.upper.clone()
+        lower[3], upper[3] = float("inf"), float("-inf")
+        boxes = PartBoxes(lower, upper)
     mine = own if with_own else None
     frame, vertex, guess = preimage._candidates(points, mine, transforms, boxes, visit)
     expected = set()

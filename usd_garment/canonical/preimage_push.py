@@ -171,13 +171,18 @@ def _candidates(
     :data:`OWN_DISTANCE` from the vertex's own preimage (``own``; all of them where it is
     None), with their frame and vertex indices ``(M,)``, GUESS_FRAMES frames at a time."""
     t_frames, n, _ = points.shape
-    joints = transforms.shape[1]
-    rotation = transforms[..., :3, :3]  # (T, J, 3, 3)
-    # (p − t) R = p R − t R for every joint: one product with the rotations side by side,
-    # axis-major (each axis's J columns together, so that each comparison below reads them
-    # contiguously).
-    side = rotation.permute(0, 2, 3, 1).reshape(t_frames, 3, 3 * joints)
-    shift = torch.einsum("tjc,tjcd->tdj", transforms[..., :3, 3], rotation)
+    part = torch.nonzero((boxes.lower <= boxes.upper).all(-1))[:, 0]  # (P,) joints with a box
+    center = (boxes.lower[part] + boxes.upper[part]) / 2  # (P, 3)
+    half = (boxes.upper[part] - boxes.lower[part]) / 2
+    # The guesses in box units, ((p − t) R − c) / h, which lie in the box where all three are
+    # within (−1, 1): one product with the scaled rotations stacked axis-major (each axis's P
+    # rows together) into (t, 3·P, n) (twice as fast as (t, n, 3·P): the product's rows are
+    # long), then one pass of |·| and a maximum over the axes (three times faster than six
+    # comparisons of the guesses against the box's sides).
+    rotation = transforms[:, part, :3, :3] / half[None, :, None, :]  # (T, P, 3, 3)
+    stacked = rotation.permute(0, 3, 1, 2).reshape(t_frames, 3 * len(part), 3)
+    shift = torch.einsum("tjc,tjcd->tdj", transforms[:, part, :3, 3], rotation)
+    shift = (shift + (center / half).t()).reshape(t_frames, 3 * len(part), 1)
     found: list[tuple[torch.Tensor, torch.Tensor, torch.Tensor]] = []
     for a in range(0, t_frames, GUESS_FRAMES):
         b = min(a + GUESS_FRAMES, t_frames)
@@ -185,18 +190,21 @@ def _candidates(
         if columns.numel() == 0:
             continue
         p = points[a:b] if columns.numel() == n else points[a:b, columns]
-        guess = torch.baddbmm(shift[a:b].reshape(b - a, 1, -1), p, side[a:b], beta=-1)
-        guess = guess.view(b - a, columns.numel(), 3, joints)
-        inside = guess[:, :, 0] > boxes.lower[:, 0]  # (t, n, J)
-        inside &= guess[:, :, 0] < boxes.upper[:, 0]
-        for axis in (1, 2):  # axis by axis: twice as fast as one comparison and .all(-1)
-            inside &= guess[:, :, axis] > boxes.lower[:, axis]
-            inside &= guess[:, :, axis] < boxes.upper[:, axis]
-        inside &= visit[a:b, columns, None]
-        frame, column, joint = inside.nonzero(as_tuple=True)
-        g, frame, vertex = guess[frame, column, :, joint], frame + a, columns[column]
+        unit = torch.baddbmm(shift[a:b], stacked[a:b], p.transpose(1, 2), beta=-1)
+        unit = unit.view(b - a, 3, len(part), columns.numel())
+        reach = unit.abs()
+        inside = torch.maximum(torch.maximum(reach[:, 0], reach[:, 1]), reach[:, 2]) < 1
+        inside &= visit[a:b, None, columns]  # (t, P, n)
+        frame, joint, column = inside.nonzero(as_tuple=True)
+        # Each axis by a flat index (five times faster than unit[frame, :, joint, column]).
+        first = (frame * (3 * len(part)) + joint) * columns.numel() + column
+        flat, stride = unit.view(-1), len(part) * columns.numel()
+        g = torch.stack([flat.index_select(0, first + axis * stride) for axis in range(3)], 1)
+        g = g * half[joint] + center[joint]  # (m, 3) in metres
+        frame, vertex = frame + a, columns[column]
         if own is not None:
-            far = (g - own[frame, vertex]).square().sum(-1) > OWN_DISTANCE**2
+            mine = own.view(-1, 3).index_select(0, frame * n + vertex)
+            far = (g - mine).square().sum(-1) > OWN_DISTANCE**2
             frame, vertex, g = frame[far], vertex[far], g[far]
         found.append((frame, vertex, g))
     if not found:
