@@ -203,7 +203,7 @@ def _candidates(
         g = g * half[joint] + center[joint]  # (m, 3) in metres
         frame, vertex = frame + a, columns[column]
         if own is not None:
-            mine = own.view(-1, 3).index_select(0, frame * n + vertex)
+            mine = own.reshape(-1, 3).index_select(0, frame * n + vertex)
             far = (g - mine).square().sum(-1) > OWN_DISTANCE**2
             frame, vertex, g = frame[far], vertex[far], g[far]
         found.append((frame, vertex, g))
