@@ -4,6 +4,7 @@ preimages (``learned+preimage``), judged by the winding-number query."""
 from __future__ import annotations
 
 import dataclasses
+import itertools
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +12,7 @@ import pytest
 import torch
 import trimesh
 
+from usd_garment.body.lbs import batch_rodrigues
 from usd_garment.body.model import BodyModel
 from usd_garment.canonical import preimage_push as preimage
 from usd_garment.canonical.preimage_push import PartBoxes, preimage_push
@@ -134,14 +136,19 @@ def test_part_boxes_hold_their_parts(body_model: BodyModel) -> None:
     assert nonempty.tolist() == part.unique().tolist()
 
 
-@pytest.mark.parametrize(("with_own", "empty"), [(True, False), (False, False), (True, True)])
+@pytest.mark.parametrize(
+    ("with_own", "empty", "trunk"),
+    [(True, False, False), (False, False, False), (True, True, False), (True, False, True)],
+)
 def test_candidates_are_each_joints_rigid_guesses_in_its_box(
-    body_model: BodyModel, with_own: bool, empty: bool
+    body_model: BodyModel, with_own: bool, empty: bool, trunk: bool
 ) -> None:
     """The rigid guesses made for every joint at once, a few frames at a time, are those made
     joint by joint: R_jᵀ(p − t_j) in j's box and (in the first pass, where the own preimages
     are given) away from the vertex's own preimage, for the vertices the pass visits only; a
-    joint whose box is empty (it dominates no vertex: here the spine's, emptied) gives none."""
+    joint whose box is empty (it dominates no vertex: here the spine's, emptied) gives none.
+    With the trunk's vertices only (a T-shirt's reach) the boxes of the lower legs and feet
+    miss the points' bounding box and are left out of the product, with the same guesses."""
     gen = torch.Generator().manual_seed(3)
     betas = torch.zeros(10)
     pose = 0.4 * torch.randn(11, 24, 3, generator=gen)
@@ -149,9 +156,16 @@ def test_candidates_are_each_joints_rigid_guesses_in_its_box(
         body = body_model(betas, pose, torch.zeros(11, 3))
     transforms = body.transforms
     points = body.vertices[:, ::7] + 0.01 * torch.randn(body.vertices[:, ::7].shape, generator=gen)
+    if trunk:
+        part = body_model.weights[::7].argmax(dim=1)
+        points = points[:, torch.isin(part, torch.tensor([0, 3, 6, 9, 13, 14]))]
     own = points + 0.05 * torch.randn(points.shape, generator=gen)
     visit = torch.rand(points.shape[:2], generator=gen) < 0.8
     boxes = PartBoxes.of(body_model, betas)
+    meets = preimage._boxes_meet(
+        points, visit, transforms, (boxes.lower + boxes.upper) / 2, (boxes.upper - boxes.lower) / 2
+    )
+    assert bool((~meets[:, [7, 8, 10, 11]]).all()) == trunk  # ankles and feet
     if empty:
         lower, upper = boxes.lower.clone(), boxes.upper.clone()
         lower[3], upper[3] = float("inf"), float("-inf")
@@ -173,6 +187,36 @@ def test_candidates_are_each_joints_rigid_guesses_in_its_box(
         j = int(torch.argmin(((points[f, n] - t)[:, None, :] @ r)[:, 0].sub(g).norm(dim=-1)))
         assert (f, n, j) in expected
         torch.testing.assert_close(g, (points[f, n] - t[j]) @ r[j], rtol=0, atol=1e-5)
+
+
+def test_boxes_meet_where_their_posed_corners_reach_the_points_box() -> None:
+    """A box meets the bounding box of the visited points where the bounding box of its eight
+    posed corners does; a frame with no visited point meets none."""
+    gen = torch.Generator().manual_seed(5)
+    frames, boxes = 6, 9
+    axis = torch.randn(frames, boxes, 3, generator=gen)
+    transforms = torch.eye(4).repeat(frames, boxes, 1, 1)
+    transforms[..., :3, :3] = batch_rodrigues(axis.reshape(-1, 3)).reshape(frames, boxes, 3, 3)
+    transforms[..., :3, 3] = 0.6 * torch.randn(frames, boxes, 3, generator=gen)
+    center = 0.2 * torch.randn(boxes, 3, generator=gen)
+    half = 0.05 + 0.1 * torch.rand(boxes, 3, generator=gen)
+    points = 0.3 * torch.randn(frames, 40, 3, generator=gen)
+    visit = torch.rand(frames, 40, generator=gen) < 0.5
+    visit[2] = False
+    meets = preimage._boxes_meet(points, visit, transforms, center, half)
+    signs = torch.tensor(list(itertools.product((-1.0, 1.0), repeat=3)))  # (8, 3)
+    corners = center[:, None] + signs * half[:, None]  # (boxes, 8, 3)
+    posed = torch.einsum("fbcd,bkd->fbkc", transforms[..., :3, :3], corners)
+    posed = posed + transforms[:, :, None, :3, 3]
+    for f in range(frames):
+        seen = points[f, visit[f]]
+        for b in range(boxes):
+            expected = seen.numel() > 0 and bool(
+                (posed[f, b].amin(0) <= seen.amax(0)).all()
+                & (posed[f, b].amax(0) >= seen.amin(0)).all()
+            )
+            assert bool(meets[f, b]) == expected
+    assert 0 < int(meets.sum()) < meets.numel()
 
 
 def test_converged_guesses_stop_where_more_steps_leave_them(
