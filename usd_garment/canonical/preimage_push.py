@@ -231,10 +231,15 @@ def _boxes_meet(
     of the vertices ``visit`` ``(T, N)`` of ``points`` ``(T, N, 3)`` in a frame. A box that
     does not holds none of them: on the walk the T-shirt leaves the boxes of the legs, feet and
     hands out of the search (about 10 of 24 joints)."""
-    inf = torch.tensor(float("inf"))
-    seen = visit[..., None]
-    lowest = torch.where(seen, points, inf).amin(1)  # (T, 3)
-    highest = torch.where(seen, points, -inf).amax(1)
+    if bool(visit.all()):
+        lowest, highest = points.amin(1), points.amax(1)  # (T, 3)
+    else:  # the later passes visit a few vertices: their bounds by frame
+        frame, vertex = visit.nonzero(as_tuple=True)
+        seen, index = points[frame, vertex], frame[:, None].expand(-1, 3)
+        lowest = points.new_full((len(points), 3), float("inf"))
+        lowest = lowest.scatter_reduce(0, index, seen, "amin")
+        highest = points.new_full((len(points), 3), float("-inf"))
+        highest = highest.scatter_reduce(0, index, seen, "amax")
     # The posed box's own bounding box: its centre posed, its half sides through |R|.
     middle = torch.einsum("tjcd,jd->tjc", transforms[..., :3, :3], center) + transforms[..., :3, 3]
     reach = torch.einsum("tjcd,jd->tjc", transforms[..., :3, :3].abs(), half)
