@@ -7,8 +7,9 @@
 #
 # Writes, for each clip X, OUT_DIR/cap_X.usdc (imported as `import-bvh` does by default: the
 # shoulders opened where an arm comes within 5 mm of the trunk) and OUT_DIR/arms_X.usdc (the arms
-# as captured, --arm-clearance 0); about 40 s. No simulation: the playground clips climb and sit
-# on equipment the capture does not hold, so they judge collisions, not the error. Bench with
+# as captured, --arm-clearance 0); about 40 s. No simulation: 01_08 climbs and sits on equipment
+# the capture does not hold (the other three simulate: `usd-garment dataset make --capture
+# OUT_DIR/cap_X.usdc:test ...`, docs/judge.md, "Four more held-out captures"). Bench with
 #   usd-garment bench OUT_DIR/*.usdc --method learned --method learned+preimage --method lbs \
 #       --method lbs+postprocess --lod high --workers 2 -o OUT
 set -euo pipefail
