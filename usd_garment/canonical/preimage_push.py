@@ -229,8 +229,8 @@ def _boxes_meet(
     """``(T, P)`` bool: whether each of P boxes (``center`` and ``half`` sides ``(P, 3)`` in
     their joint's rest frame, posed by ``transforms`` ``(T, P, 4, 4)``) meets the bounding box
     of the vertices ``visit`` ``(T, N)`` of ``points`` ``(T, N, 3)`` in a frame. A box that
-    does not holds none of them: on the walk the T-shirt leaves the boxes of the legs, feet and
-    hands out of the search (about 10 of 24 joints)."""
+    does not holds none of them: on the walk the T-shirt leaves the boxes of the knees, ankles,
+    feet, wrists and hands out of the search (13.6 of 24 meet a block of eight frames)."""
     if bool(visit.all()):
         lowest, highest = points.amin(1), points.amax(1)  # (T, 3)
     else:  # the later passes visit a few vertices: their bounds by frame
@@ -241,8 +241,9 @@ def _boxes_meet(
         highest = points.new_full((len(points), 3), float("-inf"))
         highest = highest.scatter_reduce(0, index, seen, "amax")
     # The posed box's own bounding box: its centre posed, its half sides through |R|.
-    middle = torch.einsum("tjcd,jd->tjc", transforms[..., :3, :3], center) + transforms[..., :3, 3]
-    reach = torch.einsum("tjcd,jd->tjc", transforms[..., :3, :3].abs(), half)
+    rotation = transforms[..., :3, :3]  # (T, P, 3, 3)
+    middle = torch.einsum("tjcd,jd->tjc", rotation, center) + transforms[..., :3, 3]
+    reach = torch.einsum("tjcd,jd->tjc", rotation.abs(), half)
     return ((middle - reach <= highest[:, None]) & (middle + reach >= lowest[:, None])).all(-1)
 
 
