@@ -459,3 +459,35 @@ def test_the_data_script_takes_the_collars(
     assert len(kinds) == 4 + len(sets)
     assert all(a[a.index("--collars") + 1] == "rest" for a in kinds)
     assert _sets_made_as_committed(calls, garment, suffix) == sets
+
+
+def test_the_arms_data_script_makes_the_committed_sets(tmp_path: Path) -> None:
+    """``examples/train/data_arms.sh tshirt OUT BASE`` imports data.sh's cmu4 clips (the same
+    frames and names) and CMU 131_01 with the arms as captured (``--arm-clearance 0``, rest
+    collars), makes the sets arms5 and arms4b with the settings their committed manifests
+    (``docs/datasets/tshirt_NAME_stop64_manifest.json``) record, and projects arms5 onto a copy
+    of BASE's v4cs, then arms4b onto a copy of that."""
+    base = tmp_path / "base"
+    base.mkdir()
+    (base / "canonical_tshirt_v4cs.npz").write_text("v4cs")
+    calls = script_calls("data_arms.sh", "tshirt", "scratch/s64", str(base), tmp_path=tmp_path)
+    imports = [a for a in calls if a[0] == "import-bvh"]
+    assert all(a[a.index("--arm-clearance") + 1] == "0" for a in imports)
+    assert all(a[a.index("--collars") + 1] == "rest" for a in imports)
+    (tmp_path / "data").mkdir()
+    cmu4 = [a for a in script_calls("data.sh", "tshirt", tmp_path=tmp_path / "data")
+            if a[0] == "import-bvh"]  # fmt: skip
+    frames = [(a[1], a[a.index("--frames") + 1], Path(a[a.index("-o") + 1]).name) for a in cmu4]
+    assert [(a[1], a[a.index("--frames") + 1], Path(a[a.index("-o") + 1]).name)
+            for a in imports[:4]] == frames  # fmt: skip
+    assert Path(imports[4][1]).name == "cmu_131_01.bvh" and "--frames" not in imports[4]
+    assert _sets_made_as_committed(calls, "tshirt", "_stop64") == ["arms5", "arms4b"]
+    projected = [(a[a.index("--manifest") + 1], a[a.index("-o") + 1])
+                 for a in calls if a[0] == "project"]  # fmt: skip
+    assert projected == [
+        ("scratch/s64/dataset_tshirt_arms5", "scratch/s64/canonical_tshirt_v4cs_arms.npz"),
+        ("scratch/s64/dataset_tshirt_arms4b", "scratch/s64/canonical_tshirt_v4cs_arms3.npz"),
+    ]
+    for name in ("arms", "arms3"):
+        copy = tmp_path / "work" / "scratch" / "s64" / f"canonical_tshirt_v4cs_{name}.npz"
+        assert copy.read_text() == "v4cs"  # BASE's file, copied before the projections
