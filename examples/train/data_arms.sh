@@ -20,14 +20,7 @@ set -euo pipefail
 # One compound command, read whole before it runs (see data.sh).
 {
 
-GARMENT=${1:?usage: data_arms.sh tshirt|dress OUT [BASE]}
-OUT=${2:?usage: data_arms.sh tshirt|dress OUT [BASE]}
-BASE=${3:-scratch/rest}
-case $GARMENT in
-    tshirt) LAST=v4cs ;;
-    dress) LAST=v4css ;;
-    *) echo "data_arms.sh: the garment is tshirt or dress, not '$GARMENT'" >&2; exit 2 ;;
-esac
+source "$(dirname "$0")/garment_args.sh" "$@"  # GARMENT OUT BASE LAST
 MOCAP=${MOCAP:-../shared/mocap}
 EXTRA="$(dirname "$0")/../mocap"
 CAPTURES=$OUT/arms/usd
