@@ -477,9 +477,9 @@ def test_the_arms_data_script_makes_the_committed_sets(tmp_path: Path) -> None:
     (tmp_path / "data").mkdir()
     cmu4 = [a for a in script_calls("data.sh", "tshirt", tmp_path=tmp_path / "data")
             if a[0] == "import-bvh"]  # fmt: skip
-    frames = [(a[1], a[a.index("--frames") + 1], Path(a[a.index("-o") + 1]).name) for a in cmu4]
+    clips = [(a[1], a[a.index("--frames") + 1], Path(a[a.index("-o") + 1]).name) for a in cmu4]
     assert [(a[1], a[a.index("--frames") + 1], Path(a[a.index("-o") + 1]).name)
-            for a in imports[:4]] == frames  # fmt: skip
+            for a in imports[:4]] == clips  # fmt: skip
     assert Path(imports[4][1]).name == "cmu_131_01.bvh" and "--frames" not in imports[4]
     assert _sets_made_as_committed(calls, "tshirt", "_stop64") == ["arms5", "arms4b"]
     projected = [(a[a.index("--manifest") + 1], a[a.index("-o") + 1])

@@ -2,20 +2,22 @@
 # The training captures with the arms as captured (docs/learning.md, "The T-shirt trained with
 # the arms as captured"): cmu4's four captures and CMU 131_01 imported with `--arm-clearance 0`
 # (the upper arms pass into the trunk, as raw captures and AMASS hold them; data.sh's imports open
-# the shoulders), simulated as the set arms5 (the first body shape, β = 0, cmu4's) and cmu4's four
-# again as arms4b on seed 4's two shapes: its first is β = 0 again, so those four sequences are
-# arms5's to the bit (the regressor set of stop 64's candidate ARMS3 holds them twice), its second
-# new (β₁..β₄ -0.39, 0.95, 0.59, -1.00). Each set projected onto a copy of BASE's regressor set:
+# the shoulders), simulated as the set arms5 (the first body shape, β = 0, cmu4's) and cmu4's
+# four again as arms4b on seed 4's two shapes: its first is β = 0 again, so those four sequences
+# are arms5's to the bit (the regressor set of stop 64's candidate ARMS3 holds them twice), its
+# second new (β₁..β₄ -0.39, 0.95, 0.59, -1.00). Each set projected onto a copy of BASE's
+# regressor set:
 #
 #   bash examples/train/data_arms.sh tshirt|dress OUT [BASE]    # BASE: scratch/rest by default
 #
 #   OUT/canonical_GARMENT_LAST_arms.npz     BASE's LAST + arms5 (stop 64's candidate ARMS)
 #   OUT/canonical_GARMENT_LAST_arms3.npz    ... + arms4b (stop 64's candidate ARMS3)
 #
-# LAST: v4cs for the T-shirt, v4css for the dress. Run it again to finish what an interrupted run
-# left. On 2 cores (stop 64, T-shirt, beside training runs): arms5 11 minutes (131_01 fails at motion
-# frame 63: 4 of 5 sequences, 1,635 frames), arms4b 18 minutes (13_26 on the second shape fails at
-# frame 465: 7 of 8, 2,513 frames), the projections 1 and 2.6 minutes.
+# LAST: v4cs for the T-shirt, v4css for the dress (the dress's sets never made so far). Run it
+# again to finish what an interrupted run left. On 2 cores (stop 64, T-shirt, beside training
+# runs): arms5 11 minutes (131_01 fails at motion frame 63: 4 of 5 sequences, 1,635 frames),
+# arms4b 18 minutes (13_26 on the second shape fails at frame 465: 7 of 8, 2,513 frames), the
+# projections 1 and 2.6 minutes.
 set -euo pipefail
 # One compound command, read whole before it runs (see data.sh).
 {
