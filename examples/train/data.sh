@@ -57,12 +57,7 @@ for clip in 13_26:1:3029:cmu_13_26 13_29:1:2400:cmu_13_29_frames0000-2399 \
     fi
 done
 
-set_of() {  # NAME ARGS...: make (or finish) the set OUT/dataset_GARMENT_NAME
-    local name=$1
-    shift
-    usd-garment dataset make --garment "$GARMENT" --frames 90 --workers 2 --resume \
-        --collars "$COLLARS" "$@" -o "$OUT/dataset_${GARMENT}_$name"
-}
+source "$(dirname "$0")/sets.sh"  # set_of NAME ARGS..., project_onto FILE NAME
 set_of v4 --motions 10 --shapes $SHAPES --seed 0 \
     --capture "$MOCAP/cmu_131_01.bvh:train" --capture "$MOCAP/cmu_131_02.bvh:validation" \
     --capture "$MOCAP/cmu_131_03.bvh:test"
@@ -76,9 +71,6 @@ for name in $NEW_SHAPES; do  # twenty motions, each on its own shape drawn at ±
         --seed "${name//[!0-9]/}" --train-only
 done
 
-project_onto() {  # FILE NAME: add the set's layers that FILE lacks
-    usd-garment project --manifest "$OUT/dataset_${GARMENT}_$2" -o "$1" --workers 2 --update
-}
 FIRST=$OUT/canonical_${GARMENT}_v4c.npz
 FINAL=$OUT/canonical_${GARMENT}_$LAST.npz
 for name in v4 v4x cmu4; do

@@ -36,14 +36,13 @@ for clip in 02_05:0:1854 02_06:0:1440 02_07:0:1440 02_10:0:2645; do
     fi
     captures+=(--capture "$usd:train")
 done
-usd-garment dataset make --garment "$GARMENT" --frames 90 --workers 2 --resume \
-    --collars "$COLLARS" --motions 0 --shapes 1 --seed 3 "${captures[@]}" \
-    -o "$OUT/dataset_${GARMENT}_amc4"
+source "$(dirname "$0")/sets.sh"  # set_of NAME ARGS..., project_onto FILE NAME
+set_of amc4 --motions 0 --shapes 1 --seed 3 "${captures[@]}"
 
 for name in v4c $LAST; do
     file=$OUT/canonical_${GARMENT}_$name.npz
     [ -f "$file" ] || cp "$BASE/canonical_${GARMENT}_$name.npz" "$file"
-    usd-garment project --manifest "$OUT/dataset_${GARMENT}_amc4" -o "$file" --workers 2 --update
+    project_onto "$file" amc4
 done
 exit
 }

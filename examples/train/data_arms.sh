@@ -23,6 +23,7 @@ set -euo pipefail
 {
 
 source "$(dirname "$0")/garment_args.sh" "$@"  # GARMENT OUT BASE LAST
+COLLARS=rest  # the imports' and the sets'
 MOCAP=${MOCAP:-../shared/mocap}
 EXTRA="$(dirname "$0")/../mocap"
 CAPTURES=$OUT/arms/usd
@@ -35,25 +36,17 @@ for clip in 13_26:1:3029:cmu_13_26 13_29:1:2400:cmu_13_29_frames0000-2399 \
     IFS=: read -r name first last file <<<"$clip"
     usd=$CAPTURES/$file.usdc
     [ -f "$usd" ] || usd-garment import-bvh "$EXTRA/cmu_$name.bvh.xz" -o "$usd" \
-        --frames "$first:$last" --collars rest --arm-clearance 0
+        --frames "$first:$last" --collars "$COLLARS" --arm-clearance 0
     cmu4+=(--capture "$usd:train")
 done
 walk=$CAPTURES/cmu_131_01.usdc
-[ -f "$walk" ] || usd-garment import-bvh "$MOCAP/cmu_131_01.bvh" -o "$walk" --collars rest \
+[ -f "$walk" ] || usd-garment import-bvh "$MOCAP/cmu_131_01.bvh" -o "$walk" --collars "$COLLARS" \
     --arm-clearance 0
 
-set_of() {  # NAME ARGS...: make (or finish) the set OUT/dataset_GARMENT_NAME
-    local name=$1
-    shift
-    usd-garment dataset make --garment "$GARMENT" --frames 90 --workers 2 --resume \
-        --collars rest --motions 0 "$@" -o "$OUT/dataset_${GARMENT}_$name"
-}
-set_of arms5 --shapes 1 --seed 3 "${cmu4[@]}" --capture "$walk:train"
-set_of arms4b --shapes 2 --capture-shapes 2 --seed 4 "${cmu4[@]}"
+source "$(dirname "$0")/sets.sh"  # set_of NAME ARGS..., project_onto FILE NAME
+set_of arms5 --motions 0 --shapes 1 --seed 3 "${cmu4[@]}" --capture "$walk:train"
+set_of arms4b --motions 0 --shapes 2 --capture-shapes 2 --seed 4 "${cmu4[@]}"
 
-project_onto() {  # FILE NAME: add the set's layers that FILE lacks
-    usd-garment project --manifest "$OUT/dataset_${GARMENT}_$2" -o "$1" --workers 2 --update
-}
 FIRST=$OUT/canonical_${GARMENT}_${LAST}_arms.npz
 [ -f "$FIRST" ] || cp "$BASE/canonical_${GARMENT}_$LAST.npz" "$FIRST"
 project_onto "$FIRST" arms5

@@ -1,0 +1,13 @@
+# Sourced by data.sh, data_amc.sh and data_arms.sh once GARMENT, OUT and COLLARS are set: the two
+# steps each of them repeats with the training sets' common settings.
+
+set_of() {  # NAME ARGS...: make (or finish) the set OUT/dataset_GARMENT_NAME
+    local name=$1
+    shift
+    usd-garment dataset make --garment "$GARMENT" --frames 90 --workers 2 --resume \
+        --collars "$COLLARS" "$@" -o "$OUT/dataset_${GARMENT}_$name"
+}
+
+project_onto() {  # FILE NAME: add the set NAME's layers that FILE lacks
+    usd-garment project --manifest "$OUT/dataset_${GARMENT}_$2" -o "$1" --workers 2 --update
+}
