@@ -11,6 +11,7 @@ Shapes: M query points, C channels; positions in metres.
 
 from __future__ import annotations
 
+import functools
 import itertools
 
 import numpy as np
@@ -18,31 +19,52 @@ import torch
 from scipy import ndimage
 
 
+@functools.lru_cache(maxsize=64)
+def _lattice_constants(
+    shape: tuple[int, int, int], dtype: torch.dtype, device: torch.device
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The lattice's last node ``(3,)``, zero ``(3,)``, last cell ``(3,)`` (as ``dtype``) and the
+    flat index offsets ``(8,)`` (int32) of a cell's eight corners (c = 4·dx + 2·dy + dz): made
+    once per lattice, not per lookup (the preimage search looks grids up thousands of times)."""
+    upper = torch.tensor(shape, dtype=dtype, device=device) - 1
+    corners = itertools.product((0, 1), repeat=3)
+    step = [(dx * shape[1] + dy) * shape[2] + dz for dx, dy, dz in corners]
+    return (
+        upper,
+        torch.zeros_like(upper),
+        upper - 1,
+        torch.tensor(step, dtype=torch.int32, device=device),
+    )
+
+
 def _cell_and_weights(
     points: torch.Tensor, origin: torch.Tensor, spacing: float, shape: tuple[int, int, int]
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Flat lattice indices ``(M, 8)`` of the corners of each point's cell, the matching
-    trilinear weights ``(M, 8)`` and ``(M,)`` bool, whether the point lies in the lattice box,
-    for points ``(M, 3)``. Points are clamped to the lattice box (so the weights' gradient is
-    zero outside it). Corner c = 4·dx + 2·dy + dz."""
-    upper = torch.tensor(shape, dtype=points.dtype, device=points.device) - 1
+    """Flat lattice indices ``(M, 8)`` (int32) of the corners of each point's cell, the
+    matching trilinear weights ``(M, 8)`` and ``(M,)`` bool, whether the point lies in the
+    lattice box, for points ``(M, 3)``. Points are clamped to the lattice box (so the weights'
+    gradient is zero outside it). Corner c = 4·dx + 2·dy + dz."""
+    upper, zero, last, step = _lattice_constants(shape, points.dtype, points.device)
     raw = (points - origin) / spacing
-    inside = (raw.detach().amin(-1) >= 0) & (raw.detach() - upper).amax(-1).le(0)
-    g = torch.clamp(raw, min=torch.zeros_like(upper), max=upper)
-    cell = torch.minimum(g.detach().floor(), upper - 1)
+    g = torch.clamp(raw, min=zero, max=upper)
+    # In the box where clamping leaves all three as they are (NaN is not); the three columns
+    # and-ed, as a reduction over a short last dimension is several times slower.
+    same = g.detach() == raw.detach()
+    inside = same[:, 0] & same[:, 1] & same[:, 2]
+    cell = torch.minimum(g.detach().floor(), last)
     t = (g - cell).t()  # (3, M) in [0, 1]
     ends = torch.stack((1 - t, t))  # (2, 3, M): the weights of the lower and upper corners
     # The eight products (x·y)·z as one (2, 2, 2, M) broadcast over rows of M (a few ops
     # whatever M: the preimage search looks up a few hundred points dozens of times a chunk),
-    # then (M, 8); the indices by one broadcast sum (their column writes took three times
-    # longer on 229k points).
+    # then copied into the columns of an (M, 8) (a third of the time of a contiguous copy of
+    # the transpose); the indices in int32 (a lattice has fewer than 2³¹ nodes) by one
+    # broadcast sum (their column writes took three times longer on 229k points).
     w = (ends[:, None, 0] * ends[None, :, 1])[:, :, None] * ends[None, None, :, 2]
-    c = cell.long()
+    weights = points.new_empty(points.shape[0], 8)
+    weights.t().copy_(w.reshape(8, -1))
+    c = cell.int()
     base = (c[:, 0] * shape[1] + c[:, 1]) * shape[2] + c[:, 2]
-    corners = itertools.product((0, 1), repeat=3)
-    step = [(dx * shape[1] + dy) * shape[2] + dz for dx, dy, dz in corners]
-    flat = base[:, None] + torch.tensor(step, device=base.device)
-    return flat, w.reshape(8, -1).t().contiguous(), inside
+    return base[:, None] + step, weights, inside
 
 
 def _interpolate(w: torch.Tensor, table: torch.Tensor, rows: torch.Tensor) -> torch.Tensor:
@@ -148,7 +170,7 @@ class SparseGrid(torch.nn.Module):
         """Interpolated values ``(M, C)`` of each named group at points ``(M, 3)``, and ``(M,)``
         bool: whether the point lies in the lattice and all 8 corners of its cell hold values
         (rows where it is False are meaningless)."""
-        values, valid, _ = self._lookup(points, names, blend=False)
+        values, valid, _, _ = self._lookup(points, names)
         return values, valid
 
     def with_channels(self, channels: dict[str, torch.Tensor]) -> SparseGrid:
@@ -176,17 +198,19 @@ class SparseGrid(torch.nn.Module):
         """Like :meth:`forward`, with ``(M,)`` blend weights instead of the validity: the
         interpolation of 1 at the nodes inside the band (all 26 neighbours masked) and 0 at
         its edge nodes; continuous, 1 deep in the band, 0 where the point is not valid."""
-        values, valid, alpha = self._lookup(points, names, blend=True)
+        values, valid, w, rows = self._lookup(points, names)
+        alpha = _interpolate(w, self.inner(), rows)[:, 0]
         return values, alpha * valid
 
     def _lookup(
-        self, points: torch.Tensor, names: tuple[str, ...], blend: bool
-    ) -> tuple[list[torch.Tensor], torch.Tensor, torch.Tensor]:
+        self, points: torch.Tensor, names: tuple[str, ...]
+    ) -> tuple[list[torch.Tensor], torch.Tensor, torch.Tensor, torch.Tensor]:
+        """The values of :meth:`forward`, their validity, and the trilinear weights ``(M, 8)``
+        and value rows ``(M, 8)`` of the cells' corners (row 0 where a corner holds none)."""
         flat, w, inside = _cell_and_weights(points, self.origin, self.spacing, self.shape)
         rows = self.index.index_select(0, flat.view(-1)).view(flat.shape)  # (M, 8)
         # amin, not all: a bool reduction over a short last dimension is several times slower
         valid = (rows.amin(-1) >= 0) & inside
         rows = rows.clamp_min(0)
         values = [_interpolate(w, self.channel(n), rows) for n in names]
-        alpha = _interpolate(w, self.inner(), rows)[:, 0] if blend else valid.to(points.dtype)
-        return values, valid, alpha
+        return values, valid, w, rows
