@@ -137,15 +137,21 @@ class BodyFields(torch.nn.Module):
         """Values ``(M, C)`` of groups at points ``(M, 3)``: each level's values blended over the
         coarser ones' with its blend weight (1 inside its band, falling to 0 over the band's
         outermost cell, so there is no seam where a band ends); the dense grid ``coarse`` last."""
-        m = flat.shape[0]
         acc: list[torch.Tensor] | None = None
-        remaining = flat.new_ones(m)  # weight left for coarser levels
-        todo = torch.arange(m, device=flat.device)
+        remaining = flat.new_ones(flat.shape[0])  # weight left for coarser levels
+        todo = torch.arange(flat.shape[0], device=flat.device)
         for level in levels:
-            level_values, alpha = level.blended(flat[todo], names)
-            share = remaining[todo] * alpha
+            # The first level sees every point with all its weight left: no gathers.
+            first = acc is None
+            points = flat if first else flat.index_select(0, todo)
+            left = remaining if first else remaining.index_select(0, todo)
+            level_values, alpha = level.blended(points, names)
+            share = left * alpha
             acc = _add_rows(acc, todo, [share[:, None] * v for v in level_values])
-            remaining.index_put_((todo,), remaining[todo] * (1 - alpha))
+            if first:  # a new tensor: ``share`` keeps the first for its gradient
+                remaining = left * (1 - alpha)
+            else:
+                remaining.index_put_((todo,), left * (1 - alpha))
             todo = todo[alpha < 1]
             if not todo.numel():
                 break
