@@ -345,7 +345,7 @@ def _refine(
     """
     x = x - fields.shape_offsets(x, betas)  # the rigid guess is in the shaped rest frame
     kept, last = torch.arange(x.shape[0]), torch.zeros_like(x)
-    done: list[tuple[torch.Tensor, torch.Tensor, torch.Tensor]] = []  # found (x, w, kept)
+    done: list[tuple[torch.Tensor, ...]] = []  # found (x, w, kept)
     for step in range(PREIMAGE_STEPS + 1):
         weights, offset = fields.shaped(x, betas)
         blended = _blend(weights, frame, skin)
@@ -355,20 +355,26 @@ def _refine(
         delta = rest - offset - x
         if step == PREIMAGE_STEPS:
             found = delta.norm(dim=-1) < PREIMAGE_TOLERANCE
-            done.append((x[found], weights[found], kept[found]))
+            done.append(_rows(torch.nonzero(found)[:, 0], x, weights, kept))
             break
         still = delta.norm(dim=-1) >= CONVERGED
-        done.append((x[~still], weights[~still], kept[~still]))
+        done.append(_rows(torch.nonzero(~still)[:, 0], x, weights, kept))
         step_ = torch.where((delta * last).sum(-1, keepdim=True) < 0, DAMPING, 1.0) * delta
         x, last = x + step_, delta
         # The offset at the step's start stands in for the one where it ends.
         stay = still & (fields.sdf(x) - STEP_BOUND * step_.norm(dim=-1) < epsilon)
         if own is not None:
             stay &= (x + offset - own).norm(dim=-1) > OWN_RADIUS
-            own = own[stay]
-        kept, x, last = kept[stay], x[stay], last[stay]
-        target, frame = target[stay], frame[stay]
+        index = torch.nonzero(stay)[:, 0]
+        own = None if own is None else own.index_select(0, index)
+        kept, x, last, target, frame = _rows(index, kept, x, last, target, frame)
         if kept.numel() == 0:
             break
     x, weights, kept = (torch.cat(v) for v in zip(*done, strict=True))
     return x, weights, kept
+
+
+def _rows(index: torch.Tensor, *tensors: torch.Tensor) -> tuple[torch.Tensor, ...]:
+    """The rows ``index`` ``(F,)`` of each tensor: one index for them all, where a boolean mask
+    would find its rows again for each (the search selects its guesses after every step)."""
+    return tuple(t.index_select(0, index) for t in tensors)
