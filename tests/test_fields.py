@@ -173,6 +173,29 @@ def test_dense_grid_matches_grid_sample() -> None:
     torch.testing.assert_close(out[0], ref)
 
 
+def test_sparse_grid_reads_valid_in_the_box_with_every_corner_in_the_band() -> None:
+    """A point reads valid where it lies in the lattice box (on its faces too) and all eight
+    corners of its cell hold values: not beyond a face, not NaN, not in a cell with a node
+    outside the band."""
+    values = torch.rand(5, 6, 7, 2, generator=torch.Generator().manual_seed(1))
+    mask = torch.ones(5, 6, 7, dtype=torch.bool)
+    mask[4, 5, 6] = False
+    grid = SparseGrid(torch.zeros(3), 0.125, mask, {"v": values[mask]})
+    pts = torch.tensor(
+        [
+            [0.0, 0.0, 0.0],  # a corner of the box
+            [0.5, 0.3, 0.4],  # on the upper x face
+            [0.51, 0.3, 0.4],  # beyond it
+            [-0.01, 0.3, 0.4],  # below the lower x face
+            [0.45, 0.6, 0.7],  # in a cell with the unmasked node
+            [float("nan"), 0.3, 0.4],
+        ]
+    )
+    out, valid = grid(pts, ("v",))
+    assert valid.tolist() == [True, True, False, False, False, False]
+    torch.testing.assert_close(out[0][0], values[0, 0, 0])
+
+
 def test_diffusion_at_surface_is_the_surface_value() -> None:
     body = _tiny_body()
     query = BodySurfaceQuery(body.v_template.numpy(), body.faces.numpy())
