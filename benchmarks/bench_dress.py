@@ -4,7 +4,7 @@ decoded garment pushed out of the canonical body), with ``learned+preimage`` (an
 parts posing carries it into) and with ``lbs``, in-process (read, compute, write; the learned
 methods' stages in ms per frame: model loading, pose code and GRU, decoder, canonical push-out,
 fields, posing, preimage push-out) and first through the CLI, ``--cli-repeat`` times (3; with
-the interpreter's start);
+the interpreter's start; ``--cli-method`` gives them a method, e.g. ``learned+preimage``);
 ``learned+postprocess`` (``dress --quality final``), ``lbs+postprocess`` and the physics
 simulation on slices of the same animation; the ratios between them.
 
@@ -19,7 +19,8 @@ one imported with ``usd-garment import-bvh … --arm-clearance 0`` (the arms as 
 ``learned+preimage`` has the most to push).
 
 Run: ``python benchmarks/bench_dress.py [--frames 1000 | --body LAYER] [--postprocess-frames 100]
-[--simulation-frames 30] [--model LABEL=DIR ...] [--repeat N] [--cli-repeat N]``
+[--simulation-frames 30] [--model LABEL=DIR ...] [--repeat N] [--cli-repeat N]
+[--cli-method METHOD]``
 """
 
 from __future__ import annotations
@@ -91,8 +92,9 @@ def fastest(
     return best
 
 
-def cli_runs(body_usd: Path, folder: Path, repeat: int) -> None:
-    """``usd-garment dress`` (default method) in a new interpreter ``repeat`` times: the stage
+def cli_runs(body_usd: Path, folder: Path, repeat: int, method: str | None) -> None:
+    """``usd-garment dress`` (``--method method``; None: the default) in a new interpreter
+    ``repeat`` times: the stage
     processor's own figures and the wall time with the interpreter's start and imports; then the
     median and the fastest run. Run before anything else writes to disk (a run right after the
     in-process dresses, which write ~150 MB, measured 25-40 % slower)."""
@@ -101,13 +103,14 @@ def cli_runs(body_usd: Path, folder: Path, repeat: int) -> None:
         start = time.perf_counter()
         cli = subprocess.run(
             [str(Path(sys.executable).with_name("usd-garment")), "dress", str(body_usd),
-             "-o", str(folder / f"cli{i}.usdc"), "--json"],
+             "-o", str(folder / f"cli{i}.usdc"), "--json",
+             *(["--method", method] if method else [])],
             capture_output=True, text=True, check=True,
         )  # fmt: skip
         walls.append(time.perf_counter() - start)
         summary = json.loads(cli.stdout)
         frames = summary["frames"]
-        report(f"CLI run {i + 1}, default method", summary)
+        report(f"CLI run {i + 1}, {method or 'default method'}", summary)
         print(f"CLI run {i + 1} wall time incl. interpreter start: {walls[-1]:.2f} s, "
               f"{frames / walls[-1]:.1f} frames/s")  # fmt: skip
         (folder / f"cli{i}.usdc").unlink()
@@ -126,6 +129,7 @@ def main() -> None:
     parser.add_argument("--model", action="append", default=[], metavar="LABEL=DIR")
     parser.add_argument("--repeat", type=int, default=1, help="in-process runs; the fastest counts")
     parser.add_argument("--cli-repeat", type=int, default=3, help="runs of the CLI command")
+    parser.add_argument("--cli-method", help="the CLI runs' --method (default: none given)")
     args = parser.parse_args()
     print(f"torch {torch.__version__}, {torch.get_num_threads()} threads")
     with tempfile.TemporaryDirectory() as tmp:
@@ -140,7 +144,7 @@ def main() -> None:
             print(f"built {args.frames}-frame body layer in {time.perf_counter() - start:.1f} s")
 
         default = default_method("tshirt", "high")
-        cli_runs(body_usd, folder, args.cli_repeat)
+        cli_runs(body_usd, folder, args.cli_repeat, args.cli_method)
         runs = {}
         best = f", fastest of {args.repeat} runs" if args.repeat > 1 else ""
         for method in dict.fromkeys((default, "learned+canonical", "learned+preimage", "lbs")):
