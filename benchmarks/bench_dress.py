@@ -94,10 +94,10 @@ def fastest(
 
 def cli_runs(body_usd: Path, folder: Path, repeat: int, method: str | None) -> None:
     """``usd-garment dress`` (``--method method``; None: the default) in a new interpreter
-    ``repeat`` times: the stage
-    processor's own figures and the wall time with the interpreter's start and imports; then the
-    median and the fastest run. Run before anything else writes to disk (a run right after the
-    in-process dresses, which write ~150 MB, measured 25-40 % slower)."""
+    ``repeat`` times: the stage processor's own figures and the wall time with the interpreter's
+    start and imports; then the median and the fastest run. Run before anything else writes to
+    disk (a run right after the in-process dresses, which write ~150 MB, measured 25-40 %
+    slower)."""
     walls = []
     for i in range(repeat):
         start = time.perf_counter()
