@@ -414,6 +414,13 @@ def _sets_made_as_committed(calls: list[list[str]], garment: str, suffix: str) -
     return made
 
 
+def _projections(calls: list[list[str]]) -> list[tuple[str, str]]:
+    """The ``(--manifest, -o)`` of each ``project`` call in a script's ``calls``."""
+    return [
+        (a[a.index("--manifest") + 1], a[a.index("-o") + 1]) for a in calls if a[0] == "project"
+    ]
+
+
 def _tails(captures: list[list[str]]) -> list[tuple[tuple[str, ...], str]]:
     """Captures ``[path, split]`` with each path cut to its last three parts (a manifest made
     with an absolute OUT records where that machine kept the imports)."""
@@ -433,8 +440,7 @@ def test_the_data_script_makes_the_committed_sets(garment: str, tmp_path: Path) 
     cmu4 = json.loads((MANIFESTS / f"{garment}_cmu4_manifest.json").read_text())
     imported = [a[a.index("-o") + 1] for a in calls if a[0] == "import-bvh"]
     assert imported == [path for path, _ in cmu4["config"]["captures"]]
-    projected = [(a[a.index("--manifest") + 1], a[a.index("-o") + 1])
-                 for a in calls if a[0] == "project"]  # fmt: skip
+    projected = _projections(calls)
     last = "v4cs" if garment == "tshirt" else "v4css"
     first = [(f"scratch/dataset_{garment}_{n}", f"scratch/canonical_{garment}_v4c.npz")
              for n in made[:3]]  # fmt: skip
@@ -477,13 +483,14 @@ def test_the_arms_data_script_makes_the_committed_sets(tmp_path: Path) -> None:
     (tmp_path / "data").mkdir()
     cmu4 = [a for a in script_calls("data.sh", "tshirt", tmp_path=tmp_path / "data")
             if a[0] == "import-bvh"]  # fmt: skip
-    clips = [(a[1], a[a.index("--frames") + 1], Path(a[a.index("-o") + 1]).name) for a in cmu4]
-    assert [(a[1], a[a.index("--frames") + 1], Path(a[a.index("-o") + 1]).name)
-            for a in imports[:4]] == clips  # fmt: skip
+
+    def clip(args: list[str]) -> tuple[str, str, str]:  # the BVH, its frames, the layer's name
+        return args[1], args[args.index("--frames") + 1], Path(args[args.index("-o") + 1]).name
+
+    assert [clip(a) for a in imports[:4]] == [clip(a) for a in cmu4]
     assert Path(imports[4][1]).name == "cmu_131_01.bvh" and "--frames" not in imports[4]
     assert _sets_made_as_committed(calls, "tshirt", "_stop64") == ["arms5", "arms4b"]
-    projected = [(a[a.index("--manifest") + 1], a[a.index("-o") + 1])
-                 for a in calls if a[0] == "project"]  # fmt: skip
+    projected = _projections(calls)
     assert projected == [
         ("scratch/s64/dataset_tshirt_arms5", "scratch/s64/canonical_tshirt_v4cs_arms.npz"),
         ("scratch/s64/dataset_tshirt_arms4b", "scratch/s64/canonical_tshirt_v4cs_arms3.npz"),
