@@ -235,6 +235,22 @@ def test_a_snagged_edge_fails_the_frame_though_the_p99_passes() -> None:
     assert replace(check, stretch_max=limits.max_edge_stretch).failures(limits) == []
 
 
+def test_a_failure_message_names_the_forced_share() -> None:
+    """A frame that fails on stretch while cloth lies inside the body where the pose forces it
+    (a limb through the trunk) says so in the clause added to its failure message; without
+    forced vertices (or with a NaN share, a NaN frame) the clause is empty."""
+    check = FrameCheck(
+        nan_count=0, inside_share=0.033, inside_forced_share=0.033, inside_elsewhere_share=0.0,
+        penetrating_share=0.0, max_distance=0.05, stretch_p99=1.367, stretch_max=6.62,
+    )  # fmt: skip
+    assert check.failures(CheckLimits()) == ["edge stretch p99 1.367", "an edge stretched 6.62x"]
+    assert check.forced_note() == (
+        "; 3.30% of the vertices inside the body where the pose presses a limb into it"
+    )
+    assert replace(check, inside_forced_share=0.0).forced_note() == ""
+    assert replace(check, inside_forced_share=float("nan")).forced_note() == ""
+
+
 def test_forced_contact_is_not_a_failure() -> None:
     """Cloth on an arm pressed into the trunk lies inside the body, forced by the pose: the
     frame passes; the same share inside elsewhere fails it."""

@@ -112,6 +112,18 @@ class FrameCheck:
             reasons.append(f"an edge stretched {self.stretch_max:.2f}x")
         return reasons
 
+    def forced_note(self) -> str:
+        """A clause for a failure message naming the share of vertices inside the body where the
+        pose forces it ("" where none is): cloth held where a limb passes into the trunk (a
+        capture retargeted with its arms through the body) fails on stretch with it, cloth
+        stretched in open air without it."""
+        if not self.inside_forced_share > 0:
+            return ""
+        return (
+            f"; {100 * self.inside_forced_share:.2f}% of the vertices inside the body where the "
+            "pose presses a limb into it"
+        )
+
     def fatal(self, limits: CheckLimits) -> list[str]:
         """The reasons no later frame can recover from: NaN, or a vertex farther than
         ``limits.max_distance`` from the body (the garment fell off)."""

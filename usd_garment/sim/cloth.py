@@ -591,11 +591,12 @@ def simulate_sequence(
             result.lead_in_bad.append(bad)
         stop = ""
         if bad and strict:
-            stop = ", ".join(reasons)
+            stop = ", ".join(reasons) + check.forced_note()
         elif bad and check.fatal(limits):
             stop = ", ".join(check.fatal(limits))
         elif bad_run > max_bad_run:
             stop = f"{bad_run} bad frames in a row, the last with {', '.join(reasons)}"
+            stop += check.forced_note()
         if stop:
             stage = f"motion frame {index - len(warmup)}" if in_motion else f"lead-in frame {index}"
             if not in_motion:  # the failing frame's check goes with the motion's too
