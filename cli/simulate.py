@@ -23,7 +23,7 @@ from usd_garment.cli.options import (
 from usd_garment.dress import dress as dress_stage
 from usd_garment.garment.template import GARMENT_NAMES
 from usd_garment.methods.simulation import SimulationMethod
-from usd_garment.sim.cloth import MAX_BAD_RUN, MAX_SUBSTEPS
+from usd_garment.sim.cloth import MAX_BAD_RUN, MAX_SUBSTEPS, RELEASE_MODES, ContactSettings
 from usd_garment.sim.material import ClothMaterial
 
 
@@ -43,6 +43,16 @@ from usd_garment.sim.material import ClothMaterial
     "it, flagged in the per-frame quality; NaN, a garment that fell off or more than "
     f"{MAX_BAD_RUN} bad frames in a row fail anyway).",
 )
+@click.option(
+    "--release",
+    type=click.Choice(RELEASE_MODES),
+    default=ContactSettings().release,
+    show_default=True,
+    help="When the garment's torso panels ignore the arms' skin (the end-of-frame projection "
+    "still keeps them out of an arm): never; on one last try of a frame that fails its checks "
+    "with the most substeps; or always. An arm pressed into the trunk, as captures hold it, "
+    "otherwise catches the hem in the hip.",
+)
 @json_option()
 def simulate(
     input_path: Path,
@@ -56,6 +66,7 @@ def simulate(
     body_model: Path | None,
     skeleton: str | None,
     strict: bool,
+    release: str,
     as_json: bool,
 ) -> None:
     """Simulate a garment on the animated SMPL body of BODY; write the garment layer."""
@@ -63,7 +74,12 @@ def simulate(
     with FrameProgress("simulation") as bar, user_errors():
         fabric = ClothMaterial.load(material) if material is not None else None
         method = SimulationMethod(
-            substeps, iterations, fabric, max_substeps=max(MAX_SUBSTEPS, substeps), strict=strict
+            substeps,
+            iterations,
+            fabric,
+            max_substeps=max(MAX_SUBSTEPS, substeps),
+            strict=strict,
+            contact=ContactSettings(release=release),
         )
         result = dress_stage(
             input_path,
@@ -91,7 +107,8 @@ def simulate(
         f"{100 * settings['inside_elsewhere_share_max']:.3f}%), max distance "
         f"{settings['max_distance_m']:.3f} m, stretch p99 max {settings['stretch_p99_max']:.3f} "
         f"(largest edge {settings['stretch_max']:.2f}), "
-        f"{len(settings['retries'])} frames retried, {settings['bad_frames']} bad frames kept"
+        f"{len(settings['retries'])} frames retried, {settings['released_frames']} released "
+        f"from the arms, {settings['bad_frames']} bad frames kept"
     )
     for path in result.outputs:
         click.echo(f"wrote {path}")

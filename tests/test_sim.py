@@ -23,6 +23,8 @@ from usd_garment.sim.checks import (
     unique_edges,
 )
 from usd_garment.sim.cloth import (
+    RELEASE_MODES,
+    ContactRelease,
     ContactSettings,
     GarmentSimulator,
     SimResult,
@@ -327,6 +329,83 @@ def test_bad_frames_are_kept_unless_strict() -> None:
     run = run_tube(frames=3, speed=1.0, around=12, along=7, max_bad_run=3, **kwargs)
     assert not run.ok and run.points.shape[0] == 1
     assert run.message.startswith("motion frame 1: 4 bad frames in a row, the last with edge")
+
+
+def test_released_contacts_are_dropped() -> None:
+    """While ``releasing`` is set, ``step`` drops the body contacts of the released particles
+    against the released skin (the body point's nearest vertex) and keeps every other."""
+    body = capsule()
+    sleeve, faces = tube(0.064, 0.4, 16, 9)  # 4 mm off the arm: every vertex in contact
+    everywhere = np.ones(len(body.vertices), bool)
+
+    def contacts(release: ContactRelease, releasing: bool) -> tuple[np.ndarray, np.ndarray, int]:
+        sim = GarmentSimulator(sleeve, faces, body.faces, body.vertices, substeps=1,
+                               release=release)  # fmt: skip
+        sim.releasing = releasing
+        sim.step(body.vertices)
+        count = int(sim.contacts.soft_contact_count.numpy()[0])
+        particle = sim.contacts.soft_contact_particle.numpy()[:count]
+        return particle, sim.contacts.soft_contact_body_pos.numpy()[:count], sim.released_contacts
+
+    right = sleeve[:, 0] > 0
+    kept, _, none = contacts(ContactRelease(right, everywhere), False)
+    assert none == 0 and right[kept].any() and (~right[kept]).any()
+    released, _, dropped = contacts(ContactRelease(right, everywhere), True)
+    assert not right[released].any() and dropped == right[kept].sum()
+    np.testing.assert_array_equal(np.sort(released), np.sort(kept[~right[kept]]))
+    left_skin = np.asarray(body.vertices)[:, 0] < 0
+    particle, at, _ = contacts(ContactRelease(np.ones(len(sleeve), bool), left_skin), True)
+    assert (at[:, 0] > -0.01).all() and (sleeve[particle, 0] > -0.02).all()
+    assert set(np.flatnonzero(sleeve[:, 0] > 0.02)) <= set(particle)
+    with pytest.raises(ValueError, match="release masks"):
+        GarmentSimulator(sleeve, faces, body.faces, body.vertices,
+                         release=ContactRelease(right[:-1], everywhere))  # fmt: skip
+    with pytest.raises(ValueError, match="release must be one of"):
+        ContactSettings(release="sometimes")
+
+
+def test_a_frame_failing_with_the_most_substeps_gets_one_released_try() -> None:
+    """``release="retry"``: a frame that fails its checks with the most substeps is simulated
+    once more with the release contacts dropped, and that try is kept; frames that pass are
+    simulated exactly as with ``"never"``; ``"always"`` releases every try."""
+    release = ContactRelease(np.ones(12 * 7, bool), np.ones(len(capsule().vertices), bool))
+    tight: dict[str, Any] = dict(lead_in=1, settle_frames=1, max_substeps=4, max_bad_run=100,
+                                 limits=CheckLimits(max_stretch=1.0), release=release)  # fmt: skip
+    runs = {
+        mode: run_tube(frames=2, speed=1.0, around=12, along=7, contact=ContactSettings(
+            release=mode), **tight)
+        for mode in RELEASE_MODES
+    }  # fmt: skip
+    assert runs["never"].released == [False] * 2 and runs["always"].released == [True] * 2
+    assert runs["retry"].released == [True] * 2 and runs["retry"].substeps == [4] * 2
+    # Released from the whole arm the tube falls: the kept try is the released one.
+    np.testing.assert_array_equal(runs["retry"].points, runs["always"].points)
+    assert not np.allclose(runs["retry"].points, runs["never"].points, atol=1e-3)
+    passing = {
+        mode: run_tube(frames=3, speed=1.0, around=12, along=7, lead_in=1, settle_frames=1,
+                       release=release, contact=ContactSettings(release=mode))
+        for mode in ("never", "retry")
+    }  # fmt: skip
+    assert passing["retry"].bad == [False] * 3 and passing["retry"].released == [False] * 3
+    np.testing.assert_array_equal(passing["retry"].points, passing["never"].points)
+
+
+def test_the_t_shirts_torso_panels_are_released_from_the_arms() -> None:
+    """``arm_release``: the T-shirt's torso particles (not its sleeves) against the arms' skin
+    (shoulder to hand, not the trunk)."""
+    from usd_garment.body.io import load_body_model
+    from usd_garment.garment.library import load_template
+    from usd_garment.methods.simulation import arm_release
+
+    body = load_body_model(None)
+    shirt = load_template("tshirt", "low")
+    release = arm_release(body, shirt)
+    x, y = shirt.vertices[:, 0], shirt.vertices[:, 1]
+    assert not release.particles[np.argmax(np.abs(x))]  # a sleeve's cuff
+    assert release.particles[np.argmin(y)]  # the hem
+    assert 0.5 < release.particles.mean() < 0.95
+    joint = body.weights.numpy().argmax(axis=1)
+    assert release.body_vertices[joint == 22].all() and not release.body_vertices[joint == 0].any()
 
 
 @pytest.mark.slow

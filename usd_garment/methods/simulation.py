@@ -19,6 +19,7 @@ from usd_garment.body.model import BodyModel
 from usd_garment.garment.library import find_draped
 from usd_garment.garment.template import GarmentTemplate
 from usd_garment.methods.base import Progress
+from usd_garment.methods.lbs import nearest_body_vertex
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.sim.checks import CheckLimits
 from usd_garment.sim.cloth import (
@@ -26,6 +27,7 @@ from usd_garment.sim.cloth import (
     MAX_BAD_RUN,
     MAX_SUBSTEPS,
     SUBSTEPS,
+    ContactRelease,
     ContactSettings,
     SimResult,
     easing,
@@ -116,6 +118,16 @@ def collider_parts(body: BodyModel) -> np.ndarray:
     majority = np.where(corners[:, 1] == corners[:, 2], corners[:, 1], corners[:, 0])
     return np.where((corners[:, 0] == corners[:, 1]) | (corners[:, 0] == corners[:, 2]) |
                     (corners[:, 1] == corners[:, 2]), majority, 0)  # fmt: skip
+
+
+def arm_release(body: BodyModel, template: GarmentTemplate) -> ContactRelease:
+    """The contacts ``ContactSettings.release`` drops: the garment's torso particles (``(N,)``,
+    those whose nearest rest-body vertex is not an arm's, by the joint with the largest skinning
+    weight; every particle of a garment without sleeves) against the arms' skin (``(Vb,)``,
+    the vertices of the arm parts of ``COLLIDER_PARTS``, shoulder to hand)."""
+    joint = body.weights.numpy().argmax(axis=1)
+    arm = np.isin(joint, COLLIDER_PARTS["left arm"] + COLLIDER_PARTS["right arm"])
+    return ContactRelease(~arm[nearest_body_vertex(body, template)], arm)
 
 
 def lead_in_bodies(
@@ -308,6 +320,7 @@ class SimulationMethod:
             progress=report,
             initial_vertices=initial,
             body_parts=collider_parts(body) if self.split_colliders else None,
+            release=arm_release(body, template),
         )
         if not self.result.ok:
             raise SimulationError(f"simulation failed at {self.result.message}")
@@ -330,7 +343,9 @@ def result_summary(result: SimResult, substeps: int) -> dict[str, Any]:
 
     Keys: ``status``, ``message``; ``retries`` (motion frame → substep doublings, frames without
     any left out); ``seconds_per_frame``; ``nan_frames``; ``bad_frames`` and
-    ``lead_in_bad_frames`` (frames kept although they failed their checks); the worst figures
+    ``lead_in_bad_frames`` (frames kept although they failed their checks); ``released_frames``
+    (motion frames whose kept try dropped the torso's contacts with arm skin,
+    ``ContactSettings.release``); the worst figures
     over the motion frames: ``inside_share_mean/max`` (inside the body, forced or not),
     ``inside_forced_share_mean/max``, ``inside_elsewhere_share_mean/max``,
     ``penetrating_share_max`` (inside-elsewhere deeper than the limit's depth),
@@ -341,7 +356,7 @@ def result_summary(result: SimResult, substeps: int) -> dict[str, Any]:
     the motion frames (shares as fractions rounded to 6 decimals, distances in m to 4, stretch
     to 4; None where NaN): ``inside_forced``, ``inside_elsewhere``, ``penetrating``,
     ``max_distance_m``, ``stretch_p99``, ``stretch_max``, ``projected``, ``substeps`` (used,
-    after retries) and ``bad`` (0/1).
+    after retries), ``bad`` and ``released`` (0/1).
     """
     checks = result.checks
     retries = {
@@ -359,6 +374,7 @@ def result_summary(result: SimResult, substeps: int) -> dict[str, Any]:
         "seconds_per_frame": result.seconds_per_frame,
         "nan_frames": sum(1 for c in checks if c.nan_count),
         "bad_frames": int(sum(result.bad)),
+        "released_frames": int(sum(result.released)),
         "lead_in_bad_frames": int(sum(result.lead_in_bad)),
         "inside_share_mean": _reduce(inside, np.mean),
         "inside_share_max": _reduce(inside, max),
@@ -384,5 +400,6 @@ def result_summary(result: SimResult, substeps: int) -> dict[str, Any]:
             "projected": _rounded(result.projected, 6),
             "substeps": [int(n) for n in result.substeps],
             "bad": [int(b) for b in result.bad],
+            "released": [int(r) for r in result.released],
         },
     }

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from usd_garment.eval.body_distance import BodySurface, signed_distance
 from usd_garment.eval.push_out import PUSH_OUT_EPS, push_out
@@ -44,6 +45,9 @@ MOVE_TOLERANCE = 1e-6
 #: Most consecutive bad frames (failing their checks even with ``MAX_SUBSTEPS``) a sequence may
 #: keep before it fails: a short run is a hard moment of the motion, a long one a lost garment.
 MAX_BAD_RUN = 10
+#: When the garment's released particles ignore the released skin (``ContactSettings.release``):
+#: never, on one last try of a frame that fails its checks with the most substeps, or always.
+RELEASE_MODES = ("never", "retry", "always")
 
 
 @dataclass(frozen=True)
@@ -63,6 +67,13 @@ class ContactSettings:
             query) and drop their velocity against the move (an inelastic contact). The
             penalty contact alone leaves cloth pinched in gaps narrower than two contact radii
             (a hanging arm against the trunk) inside one part or the other.
+        release: when the body contacts of a ``ContactRelease`` (the T-shirt's torso panels
+            against arm skin) are dropped, one of ``RELEASE_MODES``: ``"retry"`` adds one last
+            try, with the most substeps, to a frame that fails its checks with them. An arm
+            pressed into the trunk, as captures hold it, catches the hem between its skin
+            buried in the hip and the pelvis and tears it; released, the panels are kept out of
+            the arm by the end-of-frame projection alone (where the arm is not forced into the
+            trunk).
     """
 
     radius: float = 4e-3
@@ -71,6 +82,21 @@ class ContactSettings:
     damping: float = 1e-4
     self_radius: float = 3e-3
     project: bool = True
+    release: str = "never"
+
+    def __post_init__(self) -> None:
+        if self.release not in RELEASE_MODES:
+            raise ValueError(f"release must be one of {RELEASE_MODES}, got {self.release!r}")
+
+
+@dataclass(frozen=True)
+class ContactRelease:
+    """Body contacts that ``ContactSettings.release`` drops: those of the garment particles
+    ``particles`` ``(N,)`` bool against the skin of the body vertices ``body_vertices``
+    ``(Vb,)`` bool (a contact's body point belongs to its nearest posed body vertex)."""
+
+    particles: np.ndarray
+    body_vertices: np.ndarray
 
 
 def _import_newton() -> tuple[Any, Any]:
@@ -139,6 +165,7 @@ class GarmentSimulator:
         contact: ContactSettings | None = None,
         initial_vertices: np.ndarray | None = None,
         body_parts: np.ndarray | None = None,
+        release: ContactRelease | None = None,
         device: str = "cpu",
     ) -> None:
         """Build the Newton model.
@@ -157,6 +184,7 @@ class GarmentSimulator:
             body_parts: ``(Fb,)`` integer part label of each body triangle: each part becomes
                 its own collider, so a vertex between two parts (cloth pinched between an arm
                 and the trunk) feels both; one collider for the whole body by default.
+            release: the contacts that ``step`` drops while ``releasing`` is set.
             device: Warp device, ``"cpu"`` or e.g. ``"cuda:0"``.
 
         Raises:
@@ -175,6 +203,11 @@ class GarmentSimulator:
         labels = np.asarray(labels)
         if labels.shape != (len(body_faces),) or not np.issubdtype(labels.dtype, np.integer):
             raise ValueError(f"body_parts must be ({len(body_faces)},) integers")
+        if release is not None and (
+            np.shape(release.particles) != (len(rest),)
+            or np.shape(release.body_vertices) != (len(body0),)
+        ):
+            raise ValueError(f"release masks must be ({len(rest)},) and ({len(body0)},)")
 
         wp, newton = _import_newton()
         from newton.solvers import SolverStyle3D, style3d
@@ -232,6 +265,11 @@ class GarmentSimulator:
         # The wp.Mesh of each part, which the collision pipeline queries.
         self._part_meshes = [(used, mesh.mesh) for _, used, mesh in self._parts]
         self.body_vertices = body0.copy()
+        self.release = release
+        #: Whether ``step`` drops the ``release`` contacts; set per frame by the caller.
+        self.releasing = False
+        #: Body contacts dropped so far (summed over substeps).
+        self.released_contacts = 0
 
     @property
     def points(self) -> np.ndarray:
@@ -312,13 +350,43 @@ class GarmentSimulator:
         self._cover_body(start, target)
         for sub in range(self.substeps):
             alpha = (sub + 1) / self.substeps
-            self._set_body(start + alpha * (target - start), velocity)
+            now = start + alpha * (target - start)
+            self._set_body(now, velocity)
             self.pipeline.collide(self.state_0, self.contacts)
+            if self.releasing and self.release is not None:
+                self._drop_released(now)
             self.state_0.clear_forces()
             self.solver.step(self.state_0, self.state_1, self.control, self.contacts, dt)
             self.state_0, self.state_1 = self.state_1, self.state_0
         self.body_vertices = target
         return self.points
+
+    def _drop_released(self, body: np.ndarray) -> None:
+        """Drop the ``release`` contacts from the collision pipeline's body contacts (the
+        rest are compacted to the front), the body at ``body`` ``(Vb, 3)`` (m)."""
+        contacts = self.contacts
+        count = min(int(contacts.soft_contact_count.numpy()[0]), contacts.soft_contact_max)
+        particle = contacts.soft_contact_particle.numpy()[:count]
+        candidates = np.flatnonzero(self.release.particles[particle])
+        if candidates.size == 0:
+            return
+        points = contacts.soft_contact_body_pos.numpy()[candidates]
+        nearest = cKDTree(body).query(points.astype(np.float64))[1]
+        drop = candidates[self.release.body_vertices[nearest]]
+        if drop.size == 0:
+            return
+        keep = np.setdiff1d(np.arange(count), drop)
+        for array in (
+            contacts.soft_contact_particle, contacts.soft_contact_shape,
+            contacts.soft_contact_body_pos, contacts.soft_contact_body_vel,
+            contacts.soft_contact_normal, contacts.soft_contact_indices,
+            contacts.soft_contact_rigid_indices, contacts.soft_contact_barycentric,
+        ):  # fmt: skip
+            values = array.numpy()
+            values[: len(keep)] = values[keep]
+            array.assign(values)
+        contacts.soft_contact_count.assign(np.array([len(keep)], dtype=np.int32))
+        self.released_contacts += len(drop)
 
 
 @dataclass(frozen=True)
@@ -401,6 +469,8 @@ class SimResult:
             (kept unless strict; the last one of a failed sequence is the failing frame).
         projected: per frame of ``checks``, the share of vertices the end-of-frame projection
             moved out of the body (``ContactSettings.project``; 0 when off).
+        released: per frame of ``checks``, whether its kept try dropped the ``ContactRelease``
+            contacts (``ContactSettings.release``).
         lead_in_checks: one ``FrameCheck`` per lead-in and settle frame simulated.
         lead_in_bad: per lead-in and settle frame, whether it was bad.
         seconds_per_frame: mean wall time per simulated frame (lead-in included, checks and
@@ -414,6 +484,7 @@ class SimResult:
     substeps: list[int] = field(default_factory=list)
     bad: list[bool] = field(default_factory=list)
     projected: list[float] = field(default_factory=list)
+    released: list[bool] = field(default_factory=list)
     lead_in_checks: list[FrameCheck] = field(default_factory=list)
     lead_in_bad: list[bool] = field(default_factory=list)
     seconds_per_frame: float = 0.0
@@ -478,6 +549,7 @@ def simulate_sequence(
     progress: Callable[[int, int], None] | None = None,
     initial_vertices: np.ndarray | None = None,
     body_parts: np.ndarray | None = None,
+    release: ContactRelease | None = None,
 ) -> SimResult:
     """Simulate a garment through a body motion, checking every frame.
 
@@ -486,12 +558,14 @@ def simulate_sequence(
     holds it for ``settle_frames`` so the cloth settles, and plays the motion. Each frame is
     projected out of the body (``ContactSettings.project``) and checked (``measure_frame``:
     the shared winding-number query against the frame's body, judged on inside-elsewhere, see
-    ``CheckLimits``). A frame that fails its checks is simulated
-    again from the state before it with twice the substeps, up to ``max_substeps``. A frame that
-    still fails is *bad*: with ``strict`` the sequence stops there with status "failed";
-    otherwise it is kept, flagged in ``SimResult.bad``, and the simulation goes on from it,
-    unless it has NaNs or a vertex farther than ``limits.max_distance`` from the body (the
-    garment fell off), or it is the ``max_bad_run + 1``-th bad frame in a row: those fail.
+    ``CheckLimits``). A frame that fails its checks is simulated again from the state before it
+    with twice the substeps, up to ``max_substeps``, then, where ``contact.release`` is
+    ``"retry"``, once more with ``max_substeps`` and the ``release`` contacts dropped (that try
+    is kept). A frame that still fails is *bad*: with ``strict`` the sequence stops there with
+    status "failed"; otherwise it is kept, flagged in ``SimResult.bad``, and the simulation goes
+    on from it, unless it has NaNs or a vertex farther than ``limits.max_distance`` from the
+    body (the garment fell off), or it is the ``max_bad_run + 1``-th bad frame in a row: those
+    fail.
 
     Args:
         rest_vertices: ``(N, 3)`` garment rest shape (m), worn by ``body_rest``.
@@ -517,6 +591,7 @@ def simulate_sequence(
             template); ``rest_vertices`` by default.
         body_parts: ``(Fb,)`` part label per body triangle, one collider each (see
             ``GarmentSimulator``); the frame checks always use the whole body.
+        release: the body contacts that ``contact.release`` drops; none when None.
 
     Returns:
         The ``SimResult``; check ``ok`` before using ``points``, and ``bad`` for the frames
@@ -542,8 +617,9 @@ def simulate_sequence(
     sim = GarmentSimulator(
         rest_vertices, faces, body_faces, start_body, material,
         substeps=substeps, iterations=iterations, fps=fps, contact=contact,
-        initial_vertices=initial_vertices, body_parts=body_parts,
+        initial_vertices=initial_vertices, body_parts=body_parts, release=release,
     )  # fmt: skip
+    may_release = release is not None and contact.release == "retry"
     edges = unique_edges(np.asarray(faces))
     rest = np.asarray(rest_vertices, dtype=np.float64)
     rest_lengths = edge_lengths(rest, edges)
@@ -556,6 +632,7 @@ def simulate_sequence(
     for index, body in enumerate(np.concatenate([warmup, body_frames])):
         snapshot = sim.get_state()
         tries = substeps
+        sim.releasing = release is not None and contact.release == "always"
         while True:
             sim.substeps = tries
             points = sim.step(body)
@@ -573,10 +650,15 @@ def simulate_sequence(
                     moved, query = float(changed.mean()), None
             check = measure_frame(points, body, sim.surface, rest_lengths, edges, limits, query)
             reasons = check.failures(limits)
-            if not reasons or tries * 2 > max_substeps:
+            if not reasons:
+                break
+            if tries * 2 <= max_substeps:
+                tries *= 2
+            elif may_release and not sim.releasing:
+                sim.releasing = True
+            else:
                 break
             sim.set_state(snapshot)
-            tries *= 2
         sim.substeps = substeps
         in_motion = index >= len(warmup)
         bad = bool(reasons)
@@ -586,6 +668,7 @@ def simulate_sequence(
             result.substeps.append(tries)
             result.bad.append(bad)
             result.projected.append(moved)
+            result.released.append(sim.releasing)
         else:
             result.lead_in_checks.append(check)
             result.lead_in_bad.append(bad)
@@ -604,6 +687,7 @@ def simulate_sequence(
                 result.substeps.append(tries)
                 result.bad.append(True)
                 result.projected.append(moved)
+                result.released.append(sim.releasing)
             result.status = "failed"
             result.message = f"{stage}: {stop} (with {tries} substeps)"
             break
