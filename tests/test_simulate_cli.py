@@ -71,9 +71,10 @@ def test_simulate_writes_a_simulation_layer(tmp_path: Path) -> None:
     assert settings["material"]["area_density"] == pytest.approx(0.20022)
     assert settings["max_distance_m"] < 0.15 and settings["penetrating_share_max"] <= 0.005
     assert settings["strict"] is False and settings["bad_frames"] == 0
+    assert settings["contact"]["release"] == "retry" and settings["released_frames"] == 0
     per_frame = settings["per_frame"]
     for key in ("inside_forced", "inside_elsewhere", "stretch_p99", "stretch_max", "projected",
-                "substeps", "bad"):  # fmt: skip
+                "substeps", "bad", "released"):  # fmt: skip
         assert len(per_frame[key]) == 4, key
     pairs = zip(per_frame["stretch_p99"], per_frame["stretch_max"], strict=True)
     assert all(p99 <= largest for p99, largest in pairs)
@@ -102,11 +103,15 @@ def test_bad_frames_are_kept_and_flagged_unless_strict(
     write_body_layer(body_path, _arms_down(3), load_body_model(None))
     code, output = _run(["simulate", body_path, "-o", out, "--lod", "low"])
     assert code == 0, output
-    assert "3 bad frames kept" in output
+    assert "3 released from the arms, 3 bad frames kept" in output  # each with a released try
     stage = Usd.Stage.Open(str(out))
     settings = json.loads(read_garment(garment_meshes(stage)[0])["solverSettings"])
     assert settings["status"] == "ok" and settings["bad_frames"] == 3
     assert settings["per_frame"]["bad"] == [1, 1, 1] and settings["lead_in_bad_frames"] == 2
+    assert settings["per_frame"]["released"] == [1, 1, 1]
+    never = tmp_path / "never.usdc"
+    code, output = _run(["simulate", body_path, "-o", never, "--lod", "low", "--release", "never"])
+    assert code == 0 and "0 released from the arms, 3 bad frames kept" in output, output
     assert read_garment_layer(out)[2].flagged.tolist() == [True] * 3  # what training skips
     strict_out = tmp_path / "strict.usdc"
     code, output = _run(["simulate", body_path, "-o", strict_out, "--lod", "low", "--strict"])

@@ -184,7 +184,7 @@ class SimulationMethod:
     """
 
     name = "simulation"
-    version = "3"
+    version = "4"
 
     def __init__(
         self,

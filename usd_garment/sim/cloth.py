@@ -82,7 +82,7 @@ class ContactSettings:
     damping: float = 1e-4
     self_radius: float = 3e-3
     project: bool = True
-    release: str = "never"
+    release: str = "retry"
 
     def __post_init__(self) -> None:
         if self.release not in RELEASE_MODES:
