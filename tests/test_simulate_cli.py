@@ -173,3 +173,28 @@ def test_committed_draped_templates(name: str, lod: str) -> None:
     sdf = signed_distance(draped.vertices[None], rest_body(body)[None], surface).distance
     assert (sdf >= 0).all()
     assert not np.allclose(draped.vertices, template.vertices)  # it did settle
+
+
+@pytest.mark.slow
+def test_a_capture_with_the_arms_as_captured_is_simulated(tmp_path: Path) -> None:
+    """CMU 131_01 with the arms as captured (``--arm-clearance 0``), motion frames 45–70, where
+    the left forearm passes into the hip: by default (the released try) the T-shirt is
+    simulated with nothing inside elsewhere; without it the hem is caught and the sequence
+    fails on its run of bad frames (about 50 s each, T-shirt high)."""
+    source = Path(__file__).parents[2] / "shared" / "mocap" / "cmu_131_01.bvh"
+    if not source.is_file():
+        pytest.skip("the shared CMU clips are not beside the project")
+    body = tmp_path / "arms.usdc"
+    code, output = _run(["import-bvh", source, "-o", body, "--fps", 30, "--arm-clearance", 0])
+    assert code == 0, output
+    out = tmp_path / "sim.usdc"
+    code, output = _run(["simulate", body, "-o", out, "--frames", "45:70", "--json"])
+    assert code == 0, output
+    settings = json.loads(output[output.index("{") :])["simulation"]
+    assert settings["status"] == "ok" and settings["released_frames"] > 0
+    assert settings["inside_elsewhere_share_max"] == 0.0 and settings["max_distance_m"] < 0.10
+    assert settings["inside_forced_share_max"] > 0.01  # the forearm in the hip
+    code, output = _run(["simulate", body, "-o", tmp_path / "never.usdc", "--frames", "45:70",
+                         "--release", "never"])  # fmt: skip
+    assert code != 0 and "where the pose presses a limb into it" in output, output
+    assert not (tmp_path / "never.usdc").exists()

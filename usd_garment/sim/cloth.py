@@ -147,7 +147,8 @@ class GarmentSimulator:
 
     Style3D (projective dynamics, implicit Euler) with ``substeps`` steps of ``iterations``
     non-linear iterations per frame; gravity -9.81 m/s² along -Y. Contacts with the body are
-    collected before each substep against the body interpolated to the end of that substep.
+    collected before each substep against the body interpolated to the end of that substep
+    (without the ``release`` contacts while ``releasing`` is set).
     Warp runs CPU kernels on one thread: run one simulator per core.
     """
 
