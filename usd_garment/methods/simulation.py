@@ -123,7 +123,7 @@ def collider_parts(body: BodyModel) -> np.ndarray:
 def arm_release(body: BodyModel, template: GarmentTemplate) -> ContactRelease:
     """The contacts ``ContactSettings.release`` drops: the garment's torso particles (``(N,)``,
     those whose nearest rest-body vertex is not an arm's, by the joint with the largest skinning
-    weight; every particle of a garment without sleeves) against the arms' skin (``(Vb,)``,
+    weight; nearly all of a sleeveless dress's) against the arms' skin (``(Vb,)``,
     the vertices of the arm parts of ``COLLIDER_PARTS``, shoulder to hand)."""
     joint = body.weights.numpy().argmax(axis=1)
     arm = np.isin(joint, COLLIDER_PARTS["left arm"] + COLLIDER_PARTS["right arm"])
