@@ -72,6 +72,7 @@ def test_simulate_writes_a_simulation_layer(tmp_path: Path) -> None:
     assert settings["max_distance_m"] < 0.15 and settings["penetrating_share_max"] <= 0.005
     assert settings["strict"] is False and settings["bad_frames"] == 0
     assert settings["contact"]["release"] == "retry" and settings["released_frames"] == 0
+    assert settings["version"] == SimulationMethod.version  # which simulator made the layer
     per_frame = settings["per_frame"]
     for key in ("inside_forced", "inside_elsewhere", "stretch_p99", "stretch_max", "projected",
                 "substeps", "bad", "released"):  # fmt: skip

@@ -237,6 +237,7 @@ class SimulationMethod:
         (JSON-ready; see ``result_summary``)."""
         out: dict[str, Any] = {
             "solver": "newton.SolverStyle3D",
+            "version": self.version,
             "newton": _newton_version(),
             "substeps": self.substeps,
             "iterations": self.iterations,
