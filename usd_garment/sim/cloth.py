@@ -620,7 +620,7 @@ def simulate_sequence(
         substeps=substeps, iterations=iterations, fps=fps, contact=contact,
         initial_vertices=initial_vertices, body_parts=body_parts, release=release,
     )  # fmt: skip
-    may_release = release is not None and contact.release == "retry"
+    mode = contact.release if release is not None else "never"  # nothing to release: never
     edges = unique_edges(np.asarray(faces))
     rest = np.asarray(rest_vertices, dtype=np.float64)
     rest_lengths = edge_lengths(rest, edges)
@@ -633,7 +633,7 @@ def simulate_sequence(
     for index, body in enumerate(np.concatenate([warmup, body_frames])):
         snapshot = sim.get_state()
         tries = substeps
-        sim.releasing = release is not None and contact.release == "always"
+        sim.releasing = mode == "always"
         while True:
             sim.substeps = tries
             points = sim.step(body)
@@ -655,7 +655,7 @@ def simulate_sequence(
                 break
             if tries * 2 <= max_substeps:
                 tries *= 2
-            elif may_release and not sim.releasing:
+            elif mode == "retry" and not sim.releasing:
                 sim.releasing = True
             else:
                 break
