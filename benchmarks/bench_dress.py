@@ -1,12 +1,13 @@
 """Benchmark of the stage processor on a 1,000-frame 30 fps procedural animation: ``dress`` with
-the default method (the learned one where a model ships), with ``learned+canonical`` (the
-decoded garment pushed out of the canonical body), with ``learned+preimage`` (and then out of the
-parts posing carries it into) and with ``lbs``, in-process (read, compute, write; the learned
-methods' stages in ms per frame: model loading, pose code and GRU, decoder, canonical push-out,
-fields, posing, preimage push-out) and first through the CLI, ``--cli-repeat`` times (3; with
-the interpreter's start; ``--cli-method`` gives them a method, e.g. ``learned+preimage``);
-``learned+postprocess`` (``dress --quality final``), ``lbs+postprocess`` and the physics
-simulation on slices of the same animation; the ratios between them.
+the default method (``learned+preimage`` where a model ships: the networks' garment pushed out
+of the canonical body, then out of the parts posing carries it into), with ``learned`` (the
+networks alone), with ``learned+canonical`` (only the canonical push) and with ``lbs``,
+in-process (read, compute, write; the learned methods' stages in ms per frame: model loading,
+pose code and GRU, decoder, canonical push-out, fields, posing, preimage push-out) and first
+through the CLI, ``--cli-repeat`` times (3; with the interpreter's start; ``--cli-method`` gives
+them a method, e.g. ``learned``); ``learned+postprocess`` (``dress --quality final``),
+``lbs+postprocess`` and the physics simulation on slices of the same animation; the ratios
+between them.
 
 ``--model LABEL=DIR`` (repeatable) also dresses the walk in-process with the learned method and
 that model directory, e.g. to weigh an ensemble against the shipped model in the same run.
@@ -147,7 +148,8 @@ def main() -> None:
         cli_runs(body_usd, folder, args.cli_repeat, args.cli_method)
         runs = {}
         best = f", fastest of {args.repeat} runs" if args.repeat > 1 else ""
-        for method in dict.fromkeys((default, "learned+canonical", "learned+preimage", "lbs")):
+        in_process = (default, "learned", "learned+canonical", "learned+preimage", "lbs")
+        for method in dict.fromkeys(in_process):
             runs[method], instance = fastest(lambda m=method: get_method(m), body_usd,
                                              folder / f"{method}.usdc", args.repeat)  # fmt: skip
             report(f"{method} (in-process{best})", runs[method])
@@ -174,6 +176,9 @@ def main() -> None:
         for method in [label for label, _ in models] + list(slices):
             print(f"ratio: {default} is {fps[default] / fps[method]:.1f}x faster end to end than "
                   f"{method}")  # fmt: skip
+        if default != "learned":
+            print(f"ratio: learned (the networks alone) is {fps['learned'] / fps[default]:.2f}x "
+                  f"faster end to end than {default}")  # fmt: skip
         print("ratio: learned+preimage is "
               f"{fps['learned+preimage'] / fps['learned+postprocess']:.1f}x faster end to end "
               "than learned+postprocess")  # fmt: skip

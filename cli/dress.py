@@ -26,10 +26,9 @@ from usd_garment.methods import available_methods, get_method
 from usd_garment.methods.budget import pick_for_budget
 from usd_garment.methods.learned import (
     LEARNED_METHODS,
-    LearnedMethod,
-    LearnedPushOutMethod,
     default_method,
     learned_method,
+    quality_method,
 )
 
 #: The level of detail of each --quality.
@@ -48,9 +47,10 @@ QUALITY_LODS = {"draft": "low", "final": "high"}
 @click.option(
     "--method",
     default=None,
-    help=f"Garment method: {', '.join(available_methods())}. Default: learned, with the "
-    "shipped model of the garment (learned+postprocess with --quality final; lbs+postprocess "
-    "for a garment without a model).",
+    help=f"Garment method: {', '.join(available_methods())}. Default: learned+preimage (the "
+    "networks' garment pushed out of the body parts that posing carries it into), with the "
+    "shipped model of the garment (learned with --quality draft, learned+postprocess with "
+    "--quality final; lbs+postprocess for a garment without a model).",
 )
 @click.option(
     "--model",
@@ -73,10 +73,10 @@ QUALITY_LODS = {"draft": "low", "final": "high"}
     "--quality",
     type=click.Choice(tuple(QUALITY_LODS)),
     default=None,
-    help="Pick the level of detail for the use: draft (low: fast previews and layout; a learned "
-    "model of the high mesh is carried down to it) or final "
-    "(high, and by default the learned garment pushed out of the body wherever it enters it: "
-    "slower); instead of --lod.",
+    help="Pick the level of detail for the use: draft (low, and by default the networks' "
+    "garment alone: fast previews and layout; a learned model of the high mesh is carried down "
+    "to it) or final (high, and by default the learned garment pushed out of the body wherever "
+    "the exact inside test finds it: slower); instead of --lod.",
 )
 @click.option(
     "--error-budget",
@@ -152,11 +152,8 @@ def dress(
             raise click.BadParameter("give --quality or --lod, not both", param_hint="--quality")
         lod = QUALITY_LODS[quality]
     if method is None:
-        final = quality == "final"
-        if model is None:
-            method = default_method(garment, lod, collision_free=final)
-        else:
-            method = LearnedPushOutMethod.name if final else LearnedMethod.name
+        shipped = model is None  # a model directory given: its learned method of the quality
+        method = default_method(garment, lod, quality) if shipped else quality_method(quality)
     if model is not None and method not in LEARNED_METHODS:
         raise click.BadParameter(
             f"a model directory is for --method {' or '.join(LEARNED_METHODS)}",

@@ -1,6 +1,7 @@
 """Preview of what the README's first command makes: ``examples/walk.usda`` dressed by ``dress``
-with its default method (the shipped learned T-shirt), read back from the written garment layer
-and drawn with the posed body at three frames, front and three-quarter views.
+with its default method (the shipped learned T-shirt, ``learned+preimage``), read back from the
+written garment layer and drawn with the posed body at three frames, front and three-quarter
+views.
 
 Run: ``python examples/render_preview.py [-o docs/preview.png]``.
 """

@@ -121,7 +121,7 @@ def test_train_then_dress(body_model: BodyModel, synthetic_body: BodyModel, tmp_
     assert code == 0, output
     points, _, layer = read_garment_layer(out)
     assert points.shape == (9, 1015, 3) and np.isfinite(points).all()
-    assert layer.method == "learned"
+    assert layer.method == "learned+preimage"  # a model directory gets the default's method
     np.testing.assert_array_equal(layer.time_codes, np.arange(9))
 
     code, output = _run(["dress", body, "-o", tmp_path / "x.usdc", "--model", model])
@@ -335,7 +335,10 @@ def test_shipped_model_is_the_default(
     if body_model is synthetic_body:
         pytest.skip("needs the embedded default body and its fields")
     folder = shipped_model(garment, "high")
-    assert folder == SHIPPED_MODELS / garment and default_method(garment, "high") == "learned"
+    assert folder == SHIPPED_MODELS / garment
+    assert default_method(garment, "high") == "learned+preimage"
+    assert default_method(garment, "low", "draft") == "learned"
+    assert default_method(garment, "high", "final") == "learned+postprocess"
     assert sum(p.stat().st_size for p in folder.rglob("*") if p.is_file()) <= 12 * 2**20
     model = load_learned_model(folder, body_model)
     assert model.vertices == vertices
@@ -351,7 +354,7 @@ def test_shipped_model_is_the_default(
     code, output = _run(["dress", body, "-o", out, "--garment", garment])
     assert code == 0, output
     points, _, layer = read_garment_layer(out)
-    assert layer.method == "learned" and points.shape == (12, vertices, 3)
+    assert layer.method == "learned+preimage" and points.shape == (12, vertices, 3)
     assert np.isfinite(points).all()
 
 
@@ -561,7 +564,8 @@ def test_final_quality_pushes_the_learned_garment_out(body_model: BodyModel,
                                                       synthetic_body: BodyModel,
                                                       tmp_path: Path) -> None:  # fmt: skip
     """``--quality final`` dresses with learned+postprocess: the shipped model's garment, then
-    no vertex left inside the posed body elsewhere than where the pose forces it."""
+    no vertex left inside the posed body elsewhere than where the pose forces it; with no
+    quality, learned+preimage leaves no more inside elsewhere than the networks alone."""
     from usd_garment.eval.evaluate import evaluate_layer
 
     if body_model is synthetic_body:
@@ -569,15 +573,20 @@ def test_final_quality_pushes_the_learned_garment_out(body_model: BodyModel,
     body = tmp_path / "run.usda"
     write_body_layer(body, make_motion("run", 10, 30.0, seed=8, body=body_model), body_model)
     shares = {}
-    for quality, method in ((None, "learned"), ("final", "learned+postprocess")):
+    runs = {
+        "learned": ["--method", "learned"],
+        "learned+preimage": [],
+        "learned+postprocess": ["--quality", "final"],
+    }
+    for method, extra in runs.items():
         out = tmp_path / f"{method}.usdc"
-        extra = ["--quality", quality] if quality else []
         code, output = _run(["dress", body, "-o", out, *extra])
         assert code == 0, output
         points, _, layer = read_garment_layer(out)
         assert layer.method == method and points.shape == (10, 4405, 3)
         shares[method] = evaluate_layer(out, body)[0].summary()["inside_elsewhere_share"]
     assert shares["learned+postprocess"] == 0.0, shares
+    assert shares["learned+preimage"] <= shares["learned"], shares
 
 
 def test_draft_carries_the_shipped_model_down(body_model: BodyModel, synthetic_body: BodyModel,
@@ -595,7 +604,7 @@ def test_draft_carries_the_shipped_model_down(body_model: BodyModel, synthetic_b
     draft, _, layer = read_garment_layer(tmp_path / "draft.usdc")
     assert layer.method == "learned"
     assert draft.shape == (6, len(load_template("tshirt", "low").vertices), 3)
-    code, output = _run(["dress", body, "-o", tmp_path / "high.usdc"])
+    code, output = _run(["dress", body, "-o", tmp_path / "high.usdc", "--method", "learned"])
     assert code == 0, output
     high = read_garment_layer(tmp_path / "high.usdc")[0]
     np.testing.assert_allclose(draft, carry_to_lod(high, "tshirt", "high", "low"), atol=1e-5)
