@@ -165,8 +165,8 @@ def dress(
     if workers > 1:
         if not getattr(instance, "push_out", False):
             raise click.BadParameter(
-                f"{method} pushes nothing out of the body: --workers is for the +postprocess "
-                "methods and --quality final",
+                f"{method} has no winding-number push-out to spread over processes: --workers "
+                "is for the +postprocess methods and --quality final",
                 param_hint="--workers",
             )
         instance.push_out_workers = workers
