@@ -339,6 +339,8 @@ def test_shipped_model_is_the_default(
     assert default_method(garment, "high") == "learned+preimage"
     assert default_method(garment, "low", "draft") == "learned"
     assert default_method(garment, "high", "final") == "learned+postprocess"
+    with pytest.raises(ValueError, match="unknown quality 'best'"):
+        default_method(garment, "high", "best")
     assert sum(p.stat().st_size for p in folder.rglob("*") if p.is_file()) <= 12 * 2**20
     model = load_learned_model(folder, body_model)
     assert model.vertices == vertices

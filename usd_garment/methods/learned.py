@@ -76,10 +76,14 @@ def _dresses(model_lod: str, lod: str) -> bool:
 
 def quality_method(quality: str | None) -> str:
     """The learned method ``dress`` uses for ``quality`` when none is asked for: the networks
-    alone for a "draft" (``learned``, about 1 ms a frame of the T-shirt), the garment pushed out
-    of the parts posing carries it into when no quality is given (``learned+preimage``, about
-    3 ms: a fortieth of the networks' collisions on held-out motion), the exact winding-number
-    push-out for "final" (``learned+postprocess``, about 45 ms)."""
+    alone for a "draft" (``learned``), the garment pushed out of the parts posing carries it into
+    when no quality is given (``learned+preimage``: a fortieth of the networks' collisions on
+    held-out motion at three to four times their time a frame), the exact winding-number push-out
+    for "final" (``learned+postprocess``, about ten times slower again; ``docs/judge.md``).
+
+    Raises:
+        ValueError: ``quality`` is none of :data:`QUALITY_METHODS`' keys.
+    """
     if quality not in QUALITY_METHODS:
         raise ValueError(f"unknown quality {quality!r} ({', '.join(map(str, QUALITY_METHODS))})")
     return QUALITY_METHODS[quality]
