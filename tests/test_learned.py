@@ -642,3 +642,35 @@ def test_learned_method_times_its_stages(body_model: BodyModel, synthetic_body: 
     assert ran == {
         "load", "regressor", "decoder", "canonical", "fields", "posing", "preimage", "carry",
     }  # fmt: skip
+
+
+def test_pushing_methods_push_the_vertices_they_write(
+    body_model: BodyModel, synthetic_body: BodyModel, tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:  # fmt: skip
+    """At a coarser level of detail than the model's, ``learned+preimage`` carries the decoded
+    canonical garment down before its pushes (a garment pushed at the model's level and carried
+    down posed can be inside again between its vertices): both pushes see the low mesh's
+    vertices, and the layer has them."""
+    import usd_garment.methods.learned as learned
+    from usd_garment.dress import dress
+
+    if body_model is synthetic_body:
+        pytest.skip("needs the embedded default body and its fields")
+    seen: dict[str, int] = {}
+
+    def spy(name: str, push: Any) -> Any:
+        def wrapped(points: torch.Tensor, *args: Any) -> torch.Tensor:
+            seen[name] = points.shape[1]
+            return push(points, *args)
+
+        return wrapped
+
+    monkeypatch.setattr(learned, "push_out_canonical", spy("canonical", learned.push_out_canonical))
+    monkeypatch.setattr(learned, "preimage_push", spy("preimage", learned.preimage_push))
+    body = tmp_path / "walk.usda"
+    write_body_layer(body, make_motion("walk", 4, 30.0, seed=4, body=body_model), body_model)
+    dress(body, tmp_path / "p.usdc", method=learned.LearnedPreimageMethod(), lod="low")
+    low = len(load_template("tshirt", "low").vertices)
+    assert seen == {"canonical": low, "preimage": low}
+    assert read_garment_layer(tmp_path / "p.usdc")[0].shape == (4, low, 3)

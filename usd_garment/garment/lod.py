@@ -45,8 +45,9 @@ def lod_with_vertices(garment: str, vertices: int) -> str | None:
 
 
 def carry_to_lod(points: np.ndarray, garment: str, source: str, target: str) -> np.ndarray:
-    """Posed garment frames ``(T, N_source, 3)`` of the ``source`` level of detail carried to
-    the ``target`` one ``(T, N_target, 3)`` (same units), through the rest-surface weights."""
+    """Garment frames ``(T, N_source, 3)`` (posed, or canonical) of the ``source`` level of
+    detail carried to the ``target`` one ``(T, N_target, 3)`` (same units), through the
+    rest-surface weights."""
     if source == target:
         return points
     return carry(points, _lod_weights(garment, source, target))
@@ -54,7 +55,8 @@ def carry_to_lod(points: np.ndarray, garment: str, source: str, target: str) -> 
 
 def carry(points: np.ndarray, weights: sparse.csr_matrix) -> np.ndarray:
     """Frames ``(T, N_source, 3)`` carried through :func:`transfer_weights` ``(N_target,
-    N_source)`` to ``(T, N_target, 3)``, same dtype."""
+    N_source)`` to ``(T, N_target, 3)``, same dtype, C-contiguous."""
     t, n = points.shape[:2]
     flat = np.asarray(points).transpose(1, 0, 2).reshape(n, t * 3)
-    return np.asarray(weights @ flat).reshape(-1, t, 3).transpose(1, 0, 2).astype(points.dtype)
+    carried = np.asarray(weights @ flat).reshape(-1, t, 3).transpose(1, 0, 2)
+    return carried.astype(points.dtype, order="C")

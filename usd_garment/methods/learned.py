@@ -51,7 +51,7 @@ FRAMES_PER_CHUNK = 256
 POSE_FRAMES = 64
 #: The stages :attr:`LearnedMethod.seconds` times.
 STAGES = (
-    "load", "regressor", "decoder", "canonical", "fields", "posing", "preimage", "carry",
+    "load", "regressor", "decoder", "carry", "canonical", "fields", "posing", "preimage",
     "push_out",
 )  # fmt: skip
 
@@ -187,8 +187,8 @@ class LearnedMethod:
         self._model: LearnedModel | None = None
         self._fields = fields
         #: Seconds spent by the last :meth:`predict_stream` in each stage (the model's and the
-        #: fields' loading, the pose code and GRU, the decoder, the canonical push-out, the
-        #: fields' linearization, the posing, the preimage push-out, the carry to a coarser mesh
+        #: fields' loading, the pose code and GRU, the decoder, the carry to a coarser mesh,
+        #: the canonical push-out, the fields' linearization, the posing, the preimage push-out
         #: and the push-out).
         self.seconds: dict[str, float] = {}
 
@@ -265,7 +265,10 @@ class LearnedMethod:
         """Posed garment points in consecutive chunks ``(t ≤ chunk, N, 3)`` float32 (m): the
         latent codes of the whole motion first (the GRU, ``(T, L)``: small), then each chunk
         decoded and posed. A ``template`` coarser than the model's level of detail gets the
-        model's garment carried down to it (``carry_to_lod``: a draft from the same networks).
+        model's garment carried down to it (``carry_to_lod``): with the preimage push, the
+        decoded canonical garment, before anything else (the pushes, the fields and the posing
+        then work on the vertices written); else the posed garment (a draft from the same
+        networks).
 
         Raises:
             ModelError: no usable model, or one trained on another template (or a coarser
@@ -281,6 +284,14 @@ class LearnedMethod:
 
         model = self.load(template.name, body)
         carried = template.lod != model.lod and _dresses(model.lod, template.lod)
+        lods = (template.name, model.lod, template.lod)
+        # learned+preimage carries the decoded canonical garment down first, so that
+        # its pushes act on the vertices written (a posed garment pushed at the model's level
+        # and carried down can be inside again between its vertices) and every later stage
+        # works on fewer vertices; the other methods carry the posed garment (stop 69: posing
+        # the coarser mesh itself left 0.02-0.05 pp more inside elsewhere where nothing pushes
+        # the posed garment).
+        early = carried and self.preimage
         if len(template.vertices) != model.vertices and not carried:
             raise ModelError(
                 f"{self.model_path}: trained on the {model.lod} {model.garment} "
@@ -306,6 +317,9 @@ class LearnedMethod:
                 with torch.no_grad():
                     x = model.decode(z[s:e])
                     lap("decoder")
+                    if early:
+                        x = torch.from_numpy(carry_to_lod(x.numpy(), *lods))
+                        lap("carry")
                     if self.canonical_push:
                         x = push_out_canonical(x, self._fields.sdf)
                         lap("canonical")
@@ -332,8 +346,8 @@ class LearnedMethod:
                         )  # fmt: skip
                         lap("preimage")
                     points = vertices.numpy()
-                if carried:
-                    points = carry_to_lod(points, template.name, model.lod, template.lod)
+                if carried and not early:
+                    points = carry_to_lod(points, *lods)
                     lap("carry")
                 if surface is not None:
                     with torch.no_grad():
