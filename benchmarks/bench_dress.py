@@ -12,6 +12,10 @@ between them.
 ``--model LABEL=DIR`` (repeatable) also dresses the walk in-process with the learned method and
 that model directory, e.g. to weigh an ensemble against the shipped model in the same run.
 
+``--lods LOD ...`` (medium low) also dresses the walk in process with the default method at those
+coarser levels of detail (where ``learned+preimage`` pushes the vertices it writes), with their
+ratios to high; ``--cli-lod LOD`` gives the CLI runs a ``--lod``.
+
 ``--repeat N`` dresses in-process N times with each method and reports the fastest run (this
 machine's speed varies by tens of per cent from one run to the next).
 
@@ -21,7 +25,7 @@ one imported with ``usd-garment import-bvh … --arm-clearance 0`` (the arms as 
 
 Run: ``python benchmarks/bench_dress.py [--frames 1000 | --body LAYER] [--postprocess-frames 100]
 [--simulation-frames 30] [--model LABEL=DIR ...] [--repeat N] [--cli-repeat N]
-[--cli-method METHOD]``
+[--cli-method METHOD] [--cli-lod LOD] [--lods LOD ...]``
 """
 
 from __future__ import annotations
@@ -79,39 +83,44 @@ def per_frame(stages: dict[str, float], summary: dict) -> None:
 
 
 def fastest(
-    make: Callable[[], GarmentMethod], body_usd: Path, output: Path, repeat: int
-) -> tuple[dict, GarmentMethod]:
-    """The summary of the fastest of ``repeat`` dresses of ``body_usd``, each by a new method
-    instance from ``make`` (model loading included), and that run's instance."""
+    make: Callable[[], GarmentMethod], body_usd: Path, output: Path, repeat: int,
+    lod: str = "high",
+) -> tuple[dict, GarmentMethod]:  # fmt: skip
+    """The summary of the fastest of ``repeat`` dresses of ``body_usd`` at level of detail
+    ``lod``, each by a new method instance from ``make`` (model loading included), and that
+    run's instance."""
     best: tuple[dict, GarmentMethod] | None = None
     for _ in range(repeat):
         instance = make()
-        summary = dress(body_usd, output, method=instance).to_json()
+        summary = dress(body_usd, output, method=instance, lod=lod).to_json()
         if best is None or sum(summary["seconds"].values()) < sum(best[0]["seconds"].values()):
             best = (summary, instance)
     assert best is not None
     return best
 
 
-def cli_runs(body_usd: Path, folder: Path, repeat: int, method: str | None) -> None:
-    """``usd-garment dress`` (``--method method``; None: the default) in a new interpreter
-    ``repeat`` times: the stage processor's own figures and the wall time with the interpreter's
-    start and imports; then the median and the fastest run. Run before anything else writes to
-    disk (a run right after the in-process dresses, which write ~150 MB, measured 25-40 %
-    slower)."""
+def cli_runs(
+    body_usd: Path, folder: Path, repeat: int, method: str | None, lod: str | None
+) -> None:
+    """``usd-garment dress`` (``--method method``, ``--lod lod``; None: the defaults) in a new
+    interpreter ``repeat`` times: the stage processor's own figures and the wall time with the
+    interpreter's start and imports; then the median and the fastest run. Run before anything
+    else writes to disk (a run right after the in-process dresses, which write ~150 MB,
+    measured 25-40 % slower)."""
     walls = []
     for i in range(repeat):
         start = time.perf_counter()
         cli = subprocess.run(
             [str(Path(sys.executable).with_name("usd-garment")), "dress", str(body_usd),
              "-o", str(folder / f"cli{i}.usdc"), "--json",
-             *(["--method", method] if method else [])],
+             *(["--method", method] if method else []), *(["--lod", lod] if lod else [])],
             capture_output=True, text=True, check=True,
         )  # fmt: skip
         walls.append(time.perf_counter() - start)
         summary = json.loads(cli.stdout)
         frames = summary["frames"]
-        report(f"CLI run {i + 1}, {method or 'default method'}", summary)
+        label = f"{method or 'default method'}{f' --lod {lod}' if lod else ''}"
+        report(f"CLI run {i + 1}, {label}", summary)
         print(f"CLI run {i + 1} wall time incl. interpreter start: {walls[-1]:.2f} s, "
               f"{frames / walls[-1]:.1f} frames/s")  # fmt: skip
         (folder / f"cli{i}.usdc").unlink()
@@ -131,6 +140,9 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=1, help="in-process runs; the fastest counts")
     parser.add_argument("--cli-repeat", type=int, default=3, help="runs of the CLI command")
     parser.add_argument("--cli-method", help="the CLI runs' --method (default: none given)")
+    parser.add_argument("--cli-lod", help="the CLI runs' --lod (default: none given)")
+    parser.add_argument("--lods", nargs="*", default=["medium", "low"],
+                        help="coarser levels the default also dresses in process")  # fmt: skip
     args = parser.parse_args()
     print(f"torch {torch.__version__}, {torch.get_num_threads()} threads")
     with tempfile.TemporaryDirectory() as tmp:
@@ -145,7 +157,7 @@ def main() -> None:
             print(f"built {args.frames}-frame body layer in {time.perf_counter() - start:.1f} s")
 
         default = default_method("tshirt", "high")
-        cli_runs(body_usd, folder, args.cli_repeat, args.cli_method)
+        cli_runs(body_usd, folder, args.cli_repeat, args.cli_method, args.cli_lod)
         runs = {}
         best = f", fastest of {args.repeat} runs" if args.repeat > 1 else ""
         in_process = (default, "learned", "learned+canonical", "learned+preimage", "lbs")
@@ -155,6 +167,13 @@ def main() -> None:
             report(f"{method} (in-process{best})", runs[method])
             if isinstance(instance, LearnedMethod):
                 per_frame(instance.seconds, runs[method])
+        for lod in args.lods:
+            label = f"{default} --lod {lod}"
+            runs[label], instance = fastest(lambda: get_method(default), body_usd,
+                                            folder / f"{lod}.usdc", args.repeat, lod)  # fmt: skip
+            report(f"{label} (in-process{best})", runs[label])
+            if isinstance(instance, LearnedMethod):
+                per_frame(instance.seconds, runs[label])
         models = [text.partition("=")[::2] for text in args.model]  # (label, directory)
         for label, path in models:
             runs[label], instance = fastest(lambda p=path: LearnedMethod(p), body_usd,
@@ -176,12 +195,16 @@ def main() -> None:
         for method in [label for label, _ in models] + list(slices):
             print(f"ratio: {default} is {fps[default] / fps[method]:.1f}x faster end to end than "
                   f"{method}")  # fmt: skip
+        for lod in args.lods:
+            ratio = fps[f"{default} --lod {lod}"] / fps[default]
+            print(f"ratio: {default} --lod {lod} is {ratio:.2f}x faster end to end than at high")
         if default != "learned":
             print(f"ratio: learned (the networks alone) is {fps['learned'] / fps[default]:.2f}x "
                   f"faster end to end than {default}")  # fmt: skip
-        print("ratio: learned+preimage is "
-              f"{fps['learned+preimage'] / fps['learned+postprocess']:.1f}x faster end to end "
-              "than learned+postprocess")  # fmt: skip
+        if default != "learned+preimage":
+            print("ratio: learned+preimage is "
+                  f"{fps['learned+preimage'] / fps['learned+postprocess']:.1f}x faster end to end "
+                  "than learned+postprocess")  # fmt: skip
 
 
 if __name__ == "__main__":
