@@ -94,13 +94,17 @@ QUALITY_LODS = {"draft": "low", "final": "high"}
     type=click.Choice(("medium", "low")),
     default=None,
     help="Also write a decimated proxy-purpose mesh of the garment at this level of detail "
-    "(its points carried from the computed garment; viewports draw it, renders the full one).",
+    "(viewports draw it, renders the full one). Its points are carried from the computed "
+    "garment, or dressed at that level by the methods that push vertices out of the body "
+    "(+postprocess, learned+preimage: carried, their garment can be inside between the vertices "
+    "they moved).",
 )
 @click.option(
     "--lod-variants",
     is_flag=True,
     help="Write the garment as a 'lod' variant set: the computed level of detail (selected) and "
-    "each coarser one, carried from it, for a viewer or a pipeline to switch.",
+    "each coarser one (carried or dressed, as for --proxy), for a viewer or a pipeline to "
+    "switch.",
 )
 @click.option(
     "--workers",

@@ -674,3 +674,47 @@ def test_pushing_methods_push_the_vertices_they_write(
     low = len(load_template("tshirt", "low").vertices)
     assert seen == {"canonical": low, "preimage": low}
     assert read_garment_layer(tmp_path / "p.usdc")[0].shape == (4, low, 3)
+
+
+def test_coarser_levels_of_a_pushing_method_are_dressed_not_carried(
+    body_model: BodyModel, synthetic_body: BodyModel, tmp_path: Path
+) -> None:
+    """With ``learned+preimage`` the lod variants and the proxy are what ``dress --lod`` writes
+    at their level (the method dresses them), not the computed garment carried down after its
+    push (which can be inside the body again between the vertices the push moved)."""
+    from pxr import Usd, UsdGeom
+
+    from usd_garment.dress import dress
+    from usd_garment.garment.lod import carry_to_lod
+
+    if body_model is synthetic_body:
+        pytest.skip("needs the embedded default body and its fields")
+    body = tmp_path / "walk.usda"
+    write_body_layer(body, make_motion("walk", 4, 30.0, seed=4, body=body_model), body_model)
+    out = tmp_path / "v.usdc"
+    dress(body, out, method="learned+preimage", lod="medium", lod_variants=True, proxy_lod="low")
+    medium, _, info = read_garment_layer(out)
+    m = info.canonical_to_local
+    stage = Usd.Stage.Open(str(out))
+    garment = stage.GetPrimAtPath(info.mesh)
+    garment.GetVariantSet("lod").SetVariantSelection("low")
+    times = info.time_codes.tolist()
+    low_variant = UsdGeom.Mesh(garment).GetPointsAttr()
+    proxy = UsdGeom.Mesh(stage.GetPrimAtPath(info.mesh + "_proxy")).GetPointsAttr()
+    dress(body, tmp_path / "low.usdc", method="learned+preimage", lod="low")
+    low = read_garment_layer(tmp_path / "low.usdc")[0] @ m[:3, :3] + m[3, :3]
+    for attr in (low_variant, proxy):
+        local = np.stack([np.asarray(attr.Get(t)) for t in times])
+        np.testing.assert_allclose(local, low, atol=1e-5)
+    carried = carry_to_lod(medium, "tshirt", "medium", "low") @ m[:3, :3] + m[3, :3]
+    assert np.abs(carried - low).max() > 1e-4
+
+
+def test_the_methods_that_push_vertices_out_say_so() -> None:
+    """``dress`` dresses coarser levels with exactly the methods that move posed vertices out of
+    the body one by one; the others' garments are carried down."""
+    from usd_garment.methods import available_methods, get_method
+    from usd_garment.methods.base import pushes_vertices
+
+    pushing = {m for m in available_methods() if pushes_vertices(get_method(m))}
+    assert pushing == {"lbs+postprocess", "learned+preimage", "learned+postprocess"}

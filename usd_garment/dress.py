@@ -3,9 +3,10 @@ method, and write the garment layer, timing each stage."""
 
 from __future__ import annotations
 
+import copy
 import json
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -13,11 +14,13 @@ from pathlib import Path
 import numpy as np
 
 from usd_garment.body.io import load_body_model
+from usd_garment.body.model import BodyModel
 from usd_garment.garment.library import load_template
 from usd_garment.garment.lod import carry, transfer_weights
 from usd_garment.garment.template import GARMENT_NAMES, LODS, GarmentTemplate
 from usd_garment.methods import GarmentMethod, get_method
-from usd_garment.methods.base import predict_chunks
+from usd_garment.methods.base import predict_chunks, pushes_vertices
+from usd_garment.motion.sequence import SmplMotion
 from usd_garment.usd.garment_layer import (
     CLIP_THRESHOLD,
     GarmentFrames,
@@ -99,10 +102,9 @@ def dress(
         template: a ready template (tests, benchmarks); skips loading one.
         clip_threshold: frames × vertices above which the layer uses value clips.
         proxy_lod: also write a proxy-purpose mesh ``<garment>_proxy`` at this (lower) level
-            of detail, its points carried from the computed garment; the garment then has the
-            render purpose and a ``proxyPrim`` to it.
+            of detail; the garment then has the render purpose and a ``proxyPrim`` to it.
         lod_variants: write the garment as a ``lod`` variant set: the computed level of detail
-            (the default selection) and each coarser one, their points carried from it.
+            (the default selection) and each coarser one.
         frames_per_chunk: frames computed and written at once; with value clips, memory stays
             bounded by a chunk and a clip whatever the length (methods that pose the whole
             sequence at once, the simulation, hold all of it).
@@ -127,21 +129,29 @@ def dress(
     motion, info = read_smpl_motion(input_path, body, skeleton, frames, betas)
     if template is None:
         template = load_template(garment, lod=lod, body_model_path=body_model)
-    variants = []  # coarser levels of detail carried from the computed one
+    variants = []  # coarser levels of detail than the computed one
     if lod_variants:
-        coarser = [k for k in LODS if LODS[k] < LODS[template.lod]]  # finest first
-        if not coarser:
+        below = [k for k in LODS if LODS[k] < LODS[template.lod]]  # finest first
+        if not below:
             raise ValueError(f"a lod variant set needs a level of detail below '{template.lod}'")
-        variants = [
-            load_template(template.name, lod=k, body_model_path=body_model) for k in coarser
-        ]
+        variants = [load_template(template.name, lod=k, body_model_path=body_model) for k in below]
     proxy = None
     if proxy_lod is not None:
         if proxy_lod not in LODS or LODS[proxy_lod] >= LODS[template.lod]:
             raise ValueError(f"the proxy must be a lower level of detail than '{template.lod}'")
         proxy = load_template(template.name, lod=proxy_lod, body_model_path=body_model)
-    carried = variants + ([proxy] if proxy is not None else [])
-    weights = [transfer_weights(template, other) for other in carried]
+    coarser = variants + ([proxy] if proxy is not None else [])
+    # The coarser levels' points are carried from the computed garment, except where the
+    # method pushes posed vertices out: carried, its garment can be inside again between the
+    # vertices it moved, so the method dresses each level as `dress --lod` would. One source
+    # per level: the proxy's may also be a variant's.
+    itself = pushes_vertices(garment_method)
+    sources = {
+        other.lod: _dressed_by_copy(garment_method, motion, body, other, frames_per_chunk)
+        if itself
+        else transfer_weights(template, other)
+        for other in coarser
+    }
     seconds["read"] = time.perf_counter() - start
     if on_read is not None:
         on_read(motion.num_frames)
@@ -153,13 +163,17 @@ def dress(
         while True:
             start = time.perf_counter()
             points = next(chunks, None)
+            if points is not None:
+                made = {lod: next(s) if isinstance(s, Iterator) else carry(points, s)
+                        for lod, s in sources.items()}  # fmt: skip
+                levels = [points, *(made[other.lod] for other in coarser)]
             seconds["compute"] += time.perf_counter() - start
             if points is None:
                 break
             start = time.perf_counter()
             if writer is None:  # after the first chunk: a learned method knows its version
                 garments = [_garment_frames(t, garment_method, body.name)
-                            for t in [template, *carried]]  # fmt: skip
+                            for t in [template, *coarser]]  # fmt: skip
                 for g, t in zip(garments[: 1 + len(variants)], [template, *variants], strict=True):
                     g.name, g.variant = template.name, t.lod if variants else ""
                     g.purpose = "render" if proxy is not None else ""
@@ -171,7 +185,7 @@ def dress(
                         root_layer=root,
                     )
                 )  # fmt: skip
-            writer.add([points, *(carry(points, w) for w in weights)])
+            writer.add(levels)
             seconds["write"] += time.perf_counter() - start
         start = time.perf_counter()
     seconds["write"] += time.perf_counter() - start  # the files renamed into place
@@ -184,6 +198,19 @@ def dress(
         method=garment_method.name,
         garment=template.name,
     )
+
+
+def _dressed_by_copy(
+    method: GarmentMethod,
+    motion: SmplMotion,
+    body: BodyModel,
+    template: GarmentTemplate,
+    chunk: int,
+) -> Iterator[np.ndarray]:
+    """``predict_chunks`` of ``template`` by a shallow copy of ``method``, made when the first
+    chunk is asked for: after the computed level's first chunk, so that the copy shares what
+    the method loaded then (a learned model, the body fields) and times its stages apart."""
+    yield from predict_chunks(copy.copy(method), motion, body, template, chunk)
 
 
 def _garment_frames(template: GarmentTemplate, method: GarmentMethod, body: str) -> GarmentFrames:

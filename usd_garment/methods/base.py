@@ -22,6 +22,9 @@ class GarmentMethod(Protocol):
         name: the registry name, written to the layer as ``garment:method``.
         version: version of the method or of its trained weights (``garment:modelVersion``).
         settings: the method's parameters, recorded as ``garment:solverSettings`` (JSON).
+
+    A method may also have ``pushes_vertices`` (bool, False where absent; see
+    :func:`pushes_vertices`) and ``predict_stream`` (see :func:`predict_chunks`).
     """
 
     name: str
@@ -61,6 +64,14 @@ def get_method(name: str) -> GarmentMethod:
     if name not in _REGISTRY:
         raise ValueError(f"unknown method '{name}' (available: {', '.join(available_methods())})")
     return _REGISTRY[name]()
+
+
+def pushes_vertices(method: GarmentMethod) -> bool:
+    """Whether ``method`` moves posed garment vertices out of the body one by one (the
+    push-outs: ``+postprocess``, ``learned+preimage``): its garment carried down to a coarser
+    mesh can then be inside the body again between the vertices it moved, so ``dress`` dresses
+    each coarser level it writes (lod variants, a proxy) with the method itself."""
+    return bool(getattr(method, "pushes_vertices", False))
 
 
 def predict_chunks(

@@ -37,6 +37,11 @@ class LbsMethod:
     push_out_workers = 1
     settings: dict[str, float | int | str] = {}  # noqa: RUF012 (read-only)
 
+    @property
+    def pushes_vertices(self) -> bool:
+        """Whether the posed vertices are pushed out of the body (``base.pushes_vertices``)."""
+        return self.push_out
+
     def predict(
         self,
         motion: SmplMotion,

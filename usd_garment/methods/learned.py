@@ -197,6 +197,11 @@ class LearnedMethod:
         return self._model.version if self._model is not None else "unloaded"
 
     @property
+    def pushes_vertices(self) -> bool:
+        """Whether posed vertices are pushed out of the body (``base.pushes_vertices``)."""
+        return self.preimage or self.push_out
+
+    @property
     def settings(self) -> dict[str, Any]:
         out: dict[str, Any] = {
             "model": str(self.model_path) if self.model_path else "shipped",
