@@ -17,6 +17,7 @@ from usd_garment.cli.options import (
 )
 from usd_garment.eval.body_distance import body_pool
 from usd_garment.eval.evaluate import evaluate_layer
+from usd_garment.garment.template import LODS
 
 #: Rows of the summary table: key, label, format.
 ROWS = (
@@ -61,6 +62,14 @@ def _cell(value: float | int | None, fmt: str) -> str:
     help="Another garment layer to measure the distance to (e.g. a simulation).",
 )
 @click.option("--garment", default=None, help="Garment mesh name when the layer has several.")
+@click.option(
+    "--lod-variant",
+    "lod",
+    type=click.Choice(tuple(LODS)),
+    default=None,
+    help="Measure this variant of the garment's 'lod' variant set (a layer written with dress "
+    "--lod-variants; default: the selected one). The file is not changed.",
+)
 @body_model_option
 @skeleton_option
 @click.option("--per-frame", is_flag=True, help="Also print one row per frame.")
@@ -71,6 +80,7 @@ def evaluate(
     body_input: Path,
     reference: Path | None,
     garment: str | None,
+    lod: str | None,
     body_model: Path | None,
     skeleton: str | None,
     per_frame: bool,
@@ -80,7 +90,7 @@ def evaluate(
     """Collisions, distance to a reference, jitter and NaNs of GARMENT_LAYER on its body."""
     with user_errors(), body_pool(workers) as pool:
         metrics, time_codes = evaluate_layer(
-            garment_layer, body_input, reference, garment, body_model, skeleton, pool
+            garment_layer, body_input, reference, garment, body_model, skeleton, pool, lod
         )
     if as_json:
         click.echo(json.dumps({"time_codes": time_codes.tolist(), **metrics.to_json()}, indent=2))

@@ -4,6 +4,7 @@ reads back what was written (value clips too), and lands in the same place whate
 from __future__ import annotations
 
 import hashlib
+import json
 from pathlib import Path
 
 import numpy as np
@@ -353,6 +354,35 @@ def test_lod_variant_set_holds_every_coarser_level(
     ]
     with pytest.raises(ValueError, match="level of detail below 'low'"):
         dress(amass_layer, tmp_path / "x.usdc", method="lbs", lod="low", lod_variants=True)
+
+
+def test_eval_measures_a_lod_variant_without_changing_the_file(
+    tmp_path: Path, amass_layer: Path
+) -> None:
+    """``eval --lod-variant`` reads the named variant of a ``dress --lod-variants`` layer (from
+    the stage's session layer: the file keeps its bytes); a variant the layer lacks, or a layer
+    without variants, is a one-line error."""
+    from usd_garment.garment.library import load_template
+    from usd_garment.garment.lod import carry_to_lod
+
+    out, plain = tmp_path / "g.usdc", tmp_path / "plain.usdc"
+    dress(amass_layer, out, method="lbs", lod="medium", lod_variants=True)
+    dress(amass_layer, plain, method="lbs", lod="medium")
+    before = hashlib.sha256(out.read_bytes()).hexdigest()
+    medium, _, _ = read_garment_layer(out)
+    low, faces, _ = read_garment_layer(out, lod="low")
+    assert len(faces) == len(load_template("tshirt", "low").faces)
+    np.testing.assert_allclose(low, carry_to_lod(medium, "tshirt", "medium", "low"), atol=1e-5)
+    args = ["eval", str(out), "--body", str(amass_layer), "--json"]
+    result = CliRunner().invoke(main, [*args, "--lod-variant", "low"])
+    assert result.exit_code == 0, result.output
+    assert len(json.loads(result.output)["time_codes"]) == len(medium)
+    assert hashlib.sha256(out.read_bytes()).hexdigest() == before
+    for layer, level in ((out, "high"), (plain, "low")):
+        bad = CliRunner().invoke(main, ["eval", str(layer), "--body", str(amass_layer),
+                                        "--lod-variant", level])  # fmt: skip
+        assert bad.exit_code == 1 and f"no 'lod' variant '{level}'" in bad.output
+        assert len(bad.output.strip().splitlines()) == 1
 
 
 def test_batched_vertex_normals_match_one_frame_at_a_time() -> None:

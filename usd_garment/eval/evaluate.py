@@ -69,8 +69,10 @@ def evaluate_layer(
     body_model: str | Path | None = None,
     skeleton: str | None = None,
     pool: BodyPool | None = None,
+    lod: str | None = None,
 ) -> tuple[GarmentMetrics, np.ndarray]:
-    """Metrics of the garment of ``garment_layer`` on the body of ``body_input``; against a
+    """Metrics of the garment of ``garment_layer`` (its ``lod`` variant ``lod``; None: the
+    selected one) on the body of ``body_input``; against a
     ``reference`` layer of another level of detail of the same garment, the reference is
     carried to the garment's level of detail first (:mod:`usd_garment.garment.lod`).
     ``pool``: worker processes that measure blocks of frames (the same figures).
@@ -81,7 +83,7 @@ def evaluate_layer(
     Raises:
         UsdInputError, BodyModelError, ValueError: unreadable or mismatched inputs.
     """
-    points, _, info = read_garment_layer(garment_layer, garment)
+    points, _, info = read_garment_layer(garment_layer, garment, lod)
     body = load_body_model(body_model)
     motion, _ = read_smpl_motion(body_input, body, skeleton)
     idx = _frame_index(motion.time_codes, info.time_codes, str(body_input))

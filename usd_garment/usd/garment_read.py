@@ -11,7 +11,7 @@ import numpy as np
 from pxr import Usd, UsdGeom
 
 from usd_garment.usd.errors import UsdInputError
-from usd_garment.usd.garment_layer import CANONICAL_TO_LOCAL_KEY
+from usd_garment.usd.garment_layer import CANONICAL_TO_LOCAL_KEY, LOD_VARIANT_SET
 
 
 @dataclass
@@ -52,16 +52,18 @@ def garment_meshes(stage: Usd.Stage) -> list[Usd.Prim]:
 
 
 def read_garment_layer(
-    path: str | Path, garment: str | None = None
+    path: str | Path, garment: str | None = None, lod: str | None = None
 ) -> tuple[np.ndarray, np.ndarray, GarmentLayerInfo]:
     """Points ``(T, N, 3)`` (canonical frame, m, float64), faces ``(F, 3)`` and a description of
-    one garment of the layer (``garment``: the mesh name; None if the layer has one garment).
+    one garment of the layer (``garment``: the mesh name; None if the layer has one garment),
+    of its ``lod`` variant ``lod`` (``dress --lod-variants``; None: the selected one; the file
+    is not changed).
 
     Raises:
-        UsdInputError: not a readable layer, no such garment, no time samples, or a per-frame
-            quality record of another length than the samples.
+        UsdInputError: not a readable layer, no such garment or variant, no time samples, or a
+            per-frame quality record of another length than the samples.
     """
-    _, prim, info = _open_garment(path, garment)  # the stage kept open while the prim is read
+    _, prim, info = _open_garment(path, garment, lod)  # the stage kept open while the prim is read
     mesh = UsdGeom.Mesh(prim)
     attr = mesh.GetPointsAttr()
     matrix = info.canonical_to_local
@@ -84,7 +86,7 @@ def read_garment_info(path: str | Path, garment: str | None = None) -> GarmentLa
 
 
 def _open_garment(
-    path: str | Path, garment: str | None
+    path: str | Path, garment: str | None, lod: str | None = None
 ) -> tuple[Usd.Stage, Usd.Prim, GarmentLayerInfo]:
     """The opened stage, the garment mesh prim in it (valid while the stage is) and its
     description (see :func:`read_garment_layer`).
@@ -108,6 +110,8 @@ def _open_garment(
         names = ", ".join(m.GetName() for m in garment_meshes(stage)) or "none"
         raise UsdInputError(f"{path}: name one garment mesh (found: {names})")
     prim = meshes[0]
+    if lod is not None:
+        _select_lod(stage, prim, lod, path)
     matrix = np.array(prim.GetCustomData()[CANONICAL_TO_LOCAL_KEY], dtype=np.float64)
     times = np.array(UsdGeom.Mesh(prim).GetPointsAttr().GetTimeSamples(), dtype=np.float64)
     if times.size == 0:
@@ -119,6 +123,25 @@ def _open_garment(
         _flagged_frames(prim, len(times), path),
     )  # fmt: skip
     return stage, prim, info
+
+
+def _select_lod(stage: Usd.Stage, prim: Usd.Prim, lod: str, path: Path) -> None:
+    """Select the ``lod`` variant ``lod`` of ``prim`` in the stage's session layer (the file's
+    layers are not edited).
+
+    Raises:
+        UsdInputError: the prim has no such variant.
+    """
+    sets = prim.GetVariantSets()
+    names = sets.GetVariantSet(LOD_VARIANT_SET).GetVariantNames() if sets.HasVariantSet(
+        LOD_VARIANT_SET) else []  # fmt: skip
+    if lod not in names:
+        raise UsdInputError(
+            f"{path}: {prim.GetPath()} has no '{LOD_VARIANT_SET}' variant '{lod}' "
+            f"(variants: {', '.join(names) or 'none'}; dress --lod-variants writes them)"
+        )
+    with Usd.EditContext(stage, stage.GetSessionLayer()):
+        sets.GetVariantSet(LOD_VARIANT_SET).SetVariantSelection(lod)
 
 
 def _flagged_frames(prim: Usd.Prim, frames: int, path: Path) -> np.ndarray:
