@@ -14,7 +14,10 @@ that model directory, e.g. to weigh an ensemble against the shipped model in the
 
 ``--lods LOD ...`` (medium low) also dresses the walk in process with the default method at those
 coarser levels of detail (where ``learned+preimage`` pushes the vertices it writes), with their
-ratios to high; ``--cli-lod LOD`` gives the CLI runs a ``--lod``.
+ratios to high; ``--cli-lod LOD`` gives the CLI runs a ``--lod``. ``--variants`` also dresses it in
+process with the default method writing every coarser level as a ``lod`` variant
+(``dress --lod-variants``: where the method pushes vertices out, each level dressed at its own),
+with its ratio to the plain layer.
 
 ``--repeat N`` dresses in-process N times with each method and reports the fastest run (this
 machine's speed varies by tens of per cent from one run to the next).
@@ -25,7 +28,7 @@ one imported with ``usd-garment import-bvh … --arm-clearance 0`` (the arms as 
 
 Run: ``python benchmarks/bench_dress.py [--frames 1000 | --body LAYER] [--postprocess-frames 100]
 [--simulation-frames 30] [--model LABEL=DIR ...] [--repeat N] [--cli-repeat N]
-[--cli-method METHOD] [--cli-lod LOD] [--lods LOD ...]``
+[--cli-method METHOD] [--cli-lod LOD] [--lods LOD ...] [--variants]``
 """
 
 from __future__ import annotations
@@ -84,15 +87,16 @@ def per_frame(stages: dict[str, float], summary: dict) -> None:
 
 def fastest(
     make: Callable[[], GarmentMethod], body_usd: Path, output: Path, repeat: int,
-    lod: str = "high",
+    lod: str = "high", variants: bool = False,
 ) -> tuple[dict, GarmentMethod]:  # fmt: skip
     """The summary of the fastest of ``repeat`` dresses of ``body_usd`` at level of detail
-    ``lod``, each by a new method instance from ``make`` (model loading included), and that
-    run's instance."""
+    ``lod`` (with every coarser level as a ``lod`` variant where ``variants``), each by a new
+    method instance from ``make`` (model loading included), and that run's instance."""
     best: tuple[dict, GarmentMethod] | None = None
     for _ in range(repeat):
         instance = make()
-        summary = dress(body_usd, output, method=instance, lod=lod).to_json()
+        summary = dress(body_usd, output, method=instance, lod=lod, lod_variants=variants)
+        summary = summary.to_json()
         if best is None or sum(summary["seconds"].values()) < sum(best[0]["seconds"].values()):
             best = (summary, instance)
     assert best is not None
@@ -143,6 +147,8 @@ def main() -> None:
     parser.add_argument("--cli-lod", help="the CLI runs' --lod (default: none given)")
     parser.add_argument("--lods", nargs="*", default=["medium", "low"],
                         help="coarser levels the default also dresses in process")  # fmt: skip
+    parser.add_argument("--variants", action="store_true",
+                        help="also dress in process with --lod-variants")  # fmt: skip
     args = parser.parse_args()
     print(f"torch {torch.__version__}, {torch.get_num_threads()} threads")
     with tempfile.TemporaryDirectory() as tmp:
@@ -174,6 +180,12 @@ def main() -> None:
             report(f"{label} (in-process{best})", runs[label])
             if isinstance(instance, LearnedMethod):
                 per_frame(instance.seconds, runs[label])
+        if args.variants:
+            label = f"{default} --lod-variants"
+            output = folder / "variants.usdc"
+            runs[label], _ = fastest(lambda: get_method(default), body_usd, output, args.repeat,
+                                     variants=True)  # fmt: skip
+            report(f"{label} (in-process{best})", runs[label])
         models = [text.partition("=")[::2] for text in args.model]  # (label, directory)
         for label, path in models:
             runs[label], instance = fastest(lambda p=path: LearnedMethod(p), body_usd,
@@ -198,6 +210,10 @@ def main() -> None:
         for lod in args.lods:
             ratio = fps[f"{default} --lod {lod}"] / fps[default]
             print(f"ratio: {default} --lod {lod} is {ratio:.2f}x faster end to end than at high")
+        if args.variants:
+            ratio = fps[default] / fps[f"{default} --lod-variants"]
+            print(f"ratio: {default} with --lod-variants takes {ratio:.2f}x the time of the plain "
+                  "layer")  # fmt: skip
         if default != "learned":
             print(f"ratio: learned (the networks alone) is {fps['learned'] / fps[default]:.2f}x "
                   f"faster end to end than {default}")  # fmt: skip
