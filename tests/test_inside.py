@@ -4,6 +4,8 @@ ray parity (trimesh's ``contains``) wherever the body does not overlap itself.""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
@@ -129,3 +131,45 @@ def test_signed_distance_in_worker_processes_is_the_same(
         pooled = signed_distance(points, verts, surface, probe_below=1e-3, pool=pool)
     for name in ("distance", "closest", "normal", "closest_inside"):
         np.testing.assert_array_equal(getattr(pooled, name), getattr(alone, name))
+
+
+def test_body_pools_of_one_size_open_together_are_one() -> None:
+    """A ``body_pool`` context entered while another of its size is open shares that pool,
+    which keeps working until the last of them exits and stops then; one process is no pool."""
+    from usd_garment.eval.body_distance import body_pool
+
+    with body_pool(2) as outer:
+        with body_pool(2) as inner, body_pool(3) as other, body_pool(1) as alone:
+            assert inner is outer and other is not outer and alone is None
+        assert outer is not None and list(outer.map(abs, [-3])) == [3]
+    with pytest.raises(RuntimeError):  # stopped: it takes no more jobs
+        list(outer.map(abs, [-3]))
+    with body_pool(2) as later:
+        assert later is not outer
+
+
+def test_dress_pushes_every_lod_variant_in_one_pool(
+    body_model: BodyModel, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``dress --lod-variants --workers 2`` with a push-out method: each level is dressed by the
+    method in turn, all in one pool of worker processes (not one pool a level)."""
+    from usd_garment.dress import dress
+    from usd_garment.eval import body_distance
+    from usd_garment.methods import get_method
+    from usd_garment.motion.procedural import make_motion
+    from usd_garment.usd.body_layer import write_body_layer
+
+    made: list[BodyPool] = []
+
+    class CountedPool(BodyPool):
+        def __init__(self, workers: int) -> None:
+            super().__init__(workers)
+            made.append(self)
+
+    monkeypatch.setattr(body_distance, "BodyPool", CountedPool)
+    body = tmp_path / "walk.usda"
+    write_body_layer(body, make_motion("walk", 2, 30.0, seed=1, body=body_model), body_model)
+    method = get_method("lbs+postprocess")
+    method.push_out_workers = 2
+    dress(body, tmp_path / "v.usdc", method=method, lod_variants=True)
+    assert len(made) == 1

@@ -17,7 +17,7 @@ from __future__ import annotations
 import multiprocessing
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ProcessPoolExecutor
-from contextlib import AbstractContextManager, nullcontext
+from contextlib import contextmanager
 from dataclasses import dataclass
 from types import TracebackType
 from typing import TYPE_CHECKING, Any
@@ -390,10 +390,31 @@ class BodyPool:
         self.close()
 
 
-def body_pool(workers: int) -> AbstractContextManager[BodyPool | None]:
-    """A :class:`BodyPool` of ``workers`` processes, or None (as a context) when one process
-    does the work (``workers`` ≤ 1)."""
-    return BodyPool(workers) if workers > 1 else nullcontext(None)
+#: The pools :func:`body_pool` has open, by size, with how many of its contexts use each.
+_OPEN_POOLS: dict[int, tuple[BodyPool, int]] = {}
+
+
+@contextmanager
+def body_pool(workers: int) -> Iterator[BodyPool | None]:
+    """A :class:`BodyPool` of ``workers`` processes, or None when one process does the work
+    (``workers`` ≤ 1), as a context. A context entered while another of the same size is open
+    shares its pool, which stops when the last of them exits: ``dress --lod-variants
+    --workers N`` dresses each level with the pushing method in turn, one pool for them all."""
+    if workers <= 1:
+        yield None
+        return
+    pool, users = _OPEN_POOLS.get(workers, (None, 0))
+    if pool is None:
+        pool = BodyPool(workers)
+    _OPEN_POOLS[workers] = (pool, users + 1)
+    try:
+        yield pool
+    finally:
+        pool, users = _OPEN_POOLS.pop(workers)
+        if users > 1:
+            _OPEN_POOLS[workers] = (pool, users - 1)
+        else:
+            pool.close()
 
 
 #: The body topology last used by this worker process (:class:`BodyPool`).
