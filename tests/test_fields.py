@@ -365,3 +365,26 @@ def test_lookup_of_one_shape_is_the_lookup_contracted_with_its_betas(
     fields.shaped(points, wanting)[1].sum().backward()
     assert wanting.grad is not None
     assert torch.allclose(wanting.grad, shape_dirs.sum(dim=(0, 1, 2)), rtol=1e-4, atol=1e-4)
+
+
+def test_template_shape_has_no_offsets_and_looks_nothing_up(
+    body: BodyModel, fields: BodyFields, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    gen = torch.Generator().manual_seed(3)
+    rest = body.shaped(torch.zeros(1, 10))[0][0]
+    points = rest + 0.03 * torch.randn(2, *rest.shape, generator=gen)
+    zero = torch.zeros(10)
+    # What the lookup gives for β = 0: the blendshapes contracted with zeros, exactly zero.
+    levels, coarse = fields._offset_grids(zero)
+    (looked_up,) = fields._cascade(points.reshape(-1, 3), ("offset",), levels, coarse)
+    assert torch.equal(looked_up, torch.zeros_like(looked_up))
+
+    def no_lookup(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the offsets of the template shape were looked up")
+
+    monkeypatch.setattr(fields, "_offset_grids", no_lookup)
+    offsets = fields.shape_offsets(points, zero)
+    assert offsets.shape == points.shape and torch.equal(offsets, torch.zeros_like(points))
+    weights, shaped_offsets = fields.shaped(points, zero)
+    assert torch.equal(shaped_offsets, offsets)
+    assert torch.allclose(weights, fields.weights(points))
