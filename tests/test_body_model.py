@@ -14,7 +14,7 @@ import torch
 from tests.synthetic import synthetic_smpl_arrays
 from usd_garment.body import SMPL_JOINT_NAMES, BodyModelError, load_body_model
 from usd_garment.body.io import save_body_model
-from usd_garment.body.lbs import batch_rodrigues
+from usd_garment.body.lbs import batch_rodrigues, inverse_skin, skin, solve3
 
 J = {name: i for i, name in enumerate(SMPL_JOINT_NAMES)}
 
@@ -36,6 +36,32 @@ def test_rodrigues_matches_reference() -> None:
         kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
         ref = np.eye(3) + np.sin(angle) * kx + (1 - np.cos(angle)) * kx @ kx
         np.testing.assert_allclose(mat, ref, atol=1e-10)
+
+
+def test_solve3_matches_lapack_on_blended_transforms() -> None:
+    gen = torch.Generator().manual_seed(4)
+    # Blends of two rotations, scaled: the skinning transforms the solve inverts.
+    first = batch_rodrigues(torch.randn(200, 3, generator=gen, dtype=torch.float64))
+    second = batch_rodrigues(torch.randn(200, 3, generator=gen, dtype=torch.float64))
+    share = torch.rand(200, 1, 1, generator=gen, dtype=torch.float64)
+    matrices = (share * first + (1 - share) * second).reshape(4, 50, 3, 3)
+    rhs = torch.randn(4, 50, 3, generator=gen, dtype=torch.float64)
+    ours = solve3(matrices, rhs)
+    assert ours.shape == rhs.shape and ours.is_contiguous()
+    np.testing.assert_allclose(ours, torch.linalg.solve(matrices, rhs[..., None])[..., 0],
+                               rtol=1e-9, atol=1e-9)  # fmt: skip
+    assert torch.allclose(torch.einsum("...cd,...d->...c", matrices, ours), rhs, atol=1e-9)
+
+
+def test_inverse_skin_inverts_skin() -> None:
+    gen = torch.Generator().manual_seed(5)
+    transforms = torch.eye(4).repeat(2, 3, 1, 1)
+    transforms[..., :3, :3] = batch_rodrigues(0.5 * torch.randn(2, 3, 3, generator=gen))
+    transforms[..., :3, 3] = torch.randn(2, 3, 3, generator=gen)
+    weights = torch.softmax(torch.randn(2, 40, 3, generator=gen), dim=-1)
+    rest = torch.randn(2, 40, 3, generator=gen)
+    posed = skin(rest, weights, transforms)
+    assert torch.allclose(inverse_skin(posed, weights, transforms), rest, atol=1e-4)
 
 
 def test_zero_pose_gives_template(smpl_npz: Path) -> None:

@@ -31,6 +31,7 @@ from dataclasses import dataclass
 
 import torch
 
+from usd_garment.body.lbs import solve3
 from usd_garment.body.model import BodyModel
 from usd_garment.canonical.push_out import sdf_and_normal
 from usd_garment.fields.body_fields import BodyFields
@@ -349,9 +350,7 @@ def _refine(
     for step in range(PREIMAGE_STEPS + 1):
         weights, offset = fields.shaped(x, betas)
         blended = _blend(weights, frame, skin)
-        # b as (M, 3, 1): with (M, 3) the solution comes back column-major, and every
-        # reduction over its rows after it runs tens of times slower.
-        rest = torch.linalg.solve(blended[..., :3], (target - blended[..., 3])[..., None])[..., 0]
+        rest = solve3(blended[..., :3], target - blended[..., 3])
         delta = rest - offset - x
         if step == PREIMAGE_STEPS:
             found = delta.norm(dim=-1) < PREIMAGE_TOLERANCE
