@@ -26,7 +26,12 @@ machine's speed varies by tens of per cent from one run to the next).
 one imported with ``usd-garment import-bvh … --arm-clearance 0`` (the arms as captured, where
 ``learned+preimage`` has the most to push).
 
-Run: ``python benchmarks/bench_dress.py [--frames 1000 | --body LAYER] [--postprocess-frames 100]
+``--betas B1,B2,...`` dresses a body of that shape in every run (``dress --betas``): the walk
+and the BVH imports have the template shape (β = 0), for which the preimage search looks up no
+shape offsets.
+
+Run: ``python benchmarks/bench_dress.py [--frames 1000 | --body LAYER] [--betas B1,B2,...]
+[--postprocess-frames 100]
 [--simulation-frames 30] [--model LABEL=DIR ...] [--repeat N] [--cli-repeat N]
 [--cli-method METHOD] [--cli-lod LOD] [--lods LOD ...] [--variants]``
 """
@@ -42,10 +47,12 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+import click
 import numpy as np
 import torch
 
 from usd_garment.body import load_body_model
+from usd_garment.cli.options import parse_betas
 from usd_garment.dress import dress
 from usd_garment.methods import GarmentMethod, get_method
 from usd_garment.methods.learned import LearnedMethod, default_method
@@ -87,15 +94,17 @@ def per_frame(stages: dict[str, float], summary: dict) -> None:
 
 def fastest(
     make: Callable[[], GarmentMethod], body_usd: Path, output: Path, repeat: int,
-    lod: str = "high", variants: bool = False,
+    lod: str = "high", variants: bool = False, betas: np.ndarray | None = None,
 ) -> tuple[dict, GarmentMethod]:  # fmt: skip
-    """The summary of the fastest of ``repeat`` dresses of ``body_usd`` at level of detail
-    ``lod`` (with every coarser level as a ``lod`` variant where ``variants``), each by a new
-    method instance from ``make`` (model loading included), and that run's instance."""
+    """The summary of the fastest of ``repeat`` dresses of ``body_usd`` (shaped by ``betas``
+    where given) at level of detail ``lod`` (with every coarser level as a ``lod`` variant where
+    ``variants``), each by a new method instance from ``make`` (model loading included), and
+    that run's instance."""
     best: tuple[dict, GarmentMethod] | None = None
     for _ in range(repeat):
         instance = make()
-        summary = dress(body_usd, output, method=instance, lod=lod, lod_variants=variants)
+        summary = dress(body_usd, output, method=instance, lod=lod, lod_variants=variants,
+                        betas=betas)  # fmt: skip
         summary = summary.to_json()
         if best is None or sum(summary["seconds"].values()) < sum(best[0]["seconds"].values()):
             best = (summary, instance)
@@ -104,9 +113,11 @@ def fastest(
 
 
 def cli_runs(
-    body_usd: Path, folder: Path, repeat: int, method: str | None, lod: str | None
-) -> None:
-    """``usd-garment dress`` (``--method method``, ``--lod lod``; None: the defaults) in a new
+    body_usd: Path, folder: Path, repeat: int, method: str | None, lod: str | None,
+    betas: str | None,
+) -> None:  # fmt: skip
+    """``usd-garment dress`` (``--method method``, ``--lod lod``, ``--betas betas``; None: the
+    defaults) in a new
     interpreter ``repeat`` times: the stage processor's own figures and the wall time with the
     interpreter's start and imports; then the median and the fastest run. Run before anything
     else writes to disk (a run right after the in-process dresses, which write ~150 MB,
@@ -117,7 +128,8 @@ def cli_runs(
         cli = subprocess.run(
             [str(Path(sys.executable).with_name("usd-garment")), "dress", str(body_usd),
              "-o", str(folder / f"cli{i}.usdc"), "--json",
-             *(["--method", method] if method else []), *(["--lod", lod] if lod else [])],
+             *(["--method", method] if method else []), *(["--lod", lod] if lod else []),
+             *(["--betas", betas] if betas else [])],
             capture_output=True, text=True, check=True,
         )  # fmt: skip
         walls.append(time.perf_counter() - start)
@@ -138,6 +150,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=1000, help="of the procedural walk")
     parser.add_argument("--body", type=Path, help="a body layer to dress instead of the walk")
+    parser.add_argument("--betas", help="shape coefficients of the body in every run, e.g. 1,-0.5")
     parser.add_argument("--postprocess-frames", type=int, default=100)
     parser.add_argument("--simulation-frames", type=int, default=30)
     parser.add_argument("--model", action="append", default=[], metavar="LABEL=DIR")
@@ -150,6 +163,10 @@ def main() -> None:
     parser.add_argument("--variants", action="store_true",
                         help="also dress in process with --lod-variants")  # fmt: skip
     args = parser.parse_args()
+    try:
+        betas = parse_betas(args.betas)
+    except click.BadParameter as error:
+        parser.error(f"--betas: {error.message}")
     print(f"torch {torch.__version__}, {torch.get_num_threads()} threads")
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
@@ -163,20 +180,22 @@ def main() -> None:
             print(f"built {args.frames}-frame body layer in {time.perf_counter() - start:.1f} s")
 
         default = default_method("tshirt", "high")
-        cli_runs(body_usd, folder, args.cli_repeat, args.cli_method, args.cli_lod)
+        cli_runs(body_usd, folder, args.cli_repeat, args.cli_method, args.cli_lod, args.betas)
         runs = {}
         best = f", fastest of {args.repeat} runs" if args.repeat > 1 else ""
         in_process = (default, "learned", "learned+canonical", "learned+preimage", "lbs")
         for method in dict.fromkeys(in_process):
             runs[method], instance = fastest(lambda m=method: get_method(m), body_usd,
-                                             folder / f"{method}.usdc", args.repeat)  # fmt: skip
+                                             folder / f"{method}.usdc", args.repeat,
+                                             betas=betas)  # fmt: skip
             report(f"{method} (in-process{best})", runs[method])
             if isinstance(instance, LearnedMethod):
                 per_frame(instance.seconds, runs[method])
         for lod in args.lods:
             label = f"{default} --lod {lod}"
             runs[label], instance = fastest(lambda: get_method(default), body_usd,
-                                            folder / f"{lod}.usdc", args.repeat, lod)  # fmt: skip
+                                            folder / f"{lod}.usdc", args.repeat, lod,
+                                            betas=betas)  # fmt: skip
             report(f"{label} (in-process{best})", runs[label])
             if isinstance(instance, LearnedMethod):
                 per_frame(instance.seconds, runs[label])
@@ -184,12 +203,13 @@ def main() -> None:
             label = f"{default} --lod-variants"
             output = folder / "variants.usdc"
             runs[label], _ = fastest(lambda: get_method(default), body_usd, output, args.repeat,
-                                     variants=True)  # fmt: skip
+                                     variants=True, betas=betas)  # fmt: skip
             report(f"{label} (in-process{best})", runs[label])
         models = [text.partition("=")[::2] for text in args.model]  # (label, directory)
         for label, path in models:
             runs[label], instance = fastest(lambda p=path: LearnedMethod(p), body_usd,
-                                            folder / "model.usdc", args.repeat)  # fmt: skip
+                                            folder / "model.usdc", args.repeat,
+                                            betas=betas)  # fmt: skip
             report(f"{label}: learned with {path} (in-process{best})", runs[label])
             per_frame(instance.seconds, runs[label])
         slices = {
@@ -201,7 +221,7 @@ def main() -> None:
         for method, count in slices.items():
             n = min(count, frames)
             runs[method] = dress(body_usd, folder / f"{method}.usdc", method=method,
-                                 frames=(0, n)).to_json()  # fmt: skip
+                                 frames=(0, n), betas=betas).to_json()  # fmt: skip
             report(f"{method} (in-process, first {n} frames)", runs[method])
         fps = {m: r["frames"] / sum(r["seconds"].values()) for m, r in runs.items()}
         for method in [label for label, _ in models] + list(slices):
