@@ -117,11 +117,10 @@ def cli_runs(
     betas: str | None,
 ) -> None:  # fmt: skip
     """``usd-garment dress`` (``--method method``, ``--lod lod``, ``--betas betas``; None: the
-    defaults) in a new
-    interpreter ``repeat`` times: the stage processor's own figures and the wall time with the
-    interpreter's start and imports; then the median and the fastest run. Run before anything
-    else writes to disk (a run right after the in-process dresses, which write ~150 MB,
-    measured 25-40 % slower)."""
+    defaults) in a new interpreter ``repeat`` times: the stage processor's own figures and the
+    wall time with the interpreter's start and imports; then the median and the fastest run.
+    Run before anything else writes to disk (a run right after the in-process dresses, which
+    write ~150 MB, measured 25-40 % slower)."""
     walls = []
     for i in range(repeat):
         start = time.perf_counter()
