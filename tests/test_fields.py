@@ -196,6 +196,20 @@ def test_sparse_grid_reads_valid_in_the_box_with_every_corner_in_the_band() -> N
     torch.testing.assert_close(out[0][0], values[0, 0, 0])
 
 
+def test_a_nan_point_reads_invalid_on_a_lattice_of_odd_sizes() -> None:
+    """A NaN point's cell is in range whatever the lattice's sizes (its integer cast wrapped to
+    an index out of range on odd ones): the sparse grid reads it invalid, the dense one NaN."""
+    values = torch.rand(5, 7, 9, 2, generator=torch.Generator().manual_seed(2))
+    mask = torch.ones(5, 7, 9, dtype=torch.bool)
+    pts = torch.tensor([[float("nan"), 0.3, 0.4], [0.25, 0.375, 0.5]])
+    out, valid = SparseGrid(torch.zeros(3), 0.125, mask, {"v": values[mask]})(pts, ("v",))
+    assert valid.tolist() == [False, True]
+    torch.testing.assert_close(out[0][1], values[2, 3, 4])
+    (dense,) = DenseGrid(torch.zeros(3), 0.125, {"v": values})(pts, ("v",))
+    assert dense[0].isnan().all()
+    torch.testing.assert_close(dense[1], values[2, 3, 4])
+
+
 def test_diffusion_at_surface_is_the_surface_value() -> None:
     body = _tiny_body()
     query = BodySurfaceQuery(body.v_template.numpy(), body.faces.numpy())
