@@ -52,12 +52,13 @@ def _cell_and_weights(
     upper, zero, last, strides, step = _lattice_constants(shape, points.dtype, points.device)
     raw = (points - origin) / spacing
     g = torch.clamp(raw, min=zero, max=upper)
-    # Detached only where there is a graph (a detach is an operation too: the preimage search's
-    # later passes look up a few hundred points at a time, where each costs as much as the work).
+    # The cell carries no gradient: detached where there is a graph, and only there (a detach is
+    # an operation too: the preimage search's later passes look up a few hundred points at a
+    # time, where each costs about as much as the work); a comparison carries none anyway.
     fixed = g.detach() if g.requires_grad else g
     # In the box where clamping leaves all three as they are (NaN is not); the three columns
     # and-ed, as a reduction over a short last dimension is several times slower.
-    same = fixed == (raw.detach() if raw.requires_grad else raw)
+    same = g == raw
     inside = same[:, 0] & same[:, 1] & same[:, 2]
     cell = torch.fmin(fixed.floor(), last)  # a NaN point's cell is the last one: in range
     t = (g - cell).t()  # (3, M) in [0, 1]
@@ -65,9 +66,10 @@ def _cell_and_weights(
     # The eight products (x·y)·z as one (2, 2, 2, M) broadcast over rows of M (a few ops
     # whatever M: the preimage search looks up a few hundred points dozens of times a chunk),
     # then copied into the columns of an (M, 8) (a third of the time of a contiguous copy of
-    # the transpose); the indices in int32 by one broadcast sum (their column writes took three
-    # times longer on 229k points), the cell's flat index by one product with the strides (exact:
-    # see _lattice_constants; ten times faster on 100k points than sums of the int columns).
+    # the transpose); the indices in int32 (a lattice has fewer than 2³¹ nodes) by one broadcast
+    # sum (their column writes took three times longer on 229k points), the cell's flat index by
+    # one product with the strides (exact: see _lattice_constants; ten times faster on 100k
+    # points than sums of the int columns).
     w = (ends[:, None, 0] * ends[None, :, 1])[:, :, None] * ends[None, None, :, 2]
     weights = points.new_empty(points.shape[0], 8)
     weights.t().copy_(w.reshape(8, -1))
