@@ -53,6 +53,19 @@ def test_solve3_matches_lapack_on_blended_transforms() -> None:
     assert torch.allclose(torch.einsum("...cd,...d->...c", matrices, ours), rhs, atol=1e-9)
 
 
+def test_solve3_gives_the_least_norm_solution_of_a_singular_blend() -> None:
+    # Two bones turned a quarter turn either way about z, blended half and half: the blend
+    # flattens x and y (det 0), where the adjugate alone divides by zero.
+    turns = batch_rodrigues(torch.tensor([[0.0, 0.0, 1.5707964], [0.0, 0.0, -1.5707964]]))
+    matrices = torch.stack([turns.mean(0), torch.eye(3)])  # (2, 3, 3), the second regular
+    rhs = torch.tensor([[0.3, -0.2, 0.5], [0.1, 0.2, 0.3]])
+    ours = solve3(matrices, rhs)
+    assert torch.isfinite(ours).all()
+    expected = torch.linalg.pinv(matrices[0].double()) @ rhs[0].double()
+    np.testing.assert_allclose(ours[0], expected, atol=1e-5)  # (0, 0, 0.5)
+    np.testing.assert_allclose(ours[1], rhs[1], atol=1e-7)
+
+
 def test_inverse_skin_inverts_skin() -> None:
     gen = torch.Generator().manual_seed(5)
     transforms = torch.eye(4).repeat(2, 3, 1, 1)

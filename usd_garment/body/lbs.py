@@ -108,10 +108,17 @@ def inverse_skin(
     return solve3(blended[..., :3], points - blended[..., 3])
 
 
+#: A blended transform whose determinant is smaller than this is taken as singular. Blends of
+#: rotations have columns of norm at most 1, so the bound needs no scale of its own.
+SINGULAR = 1e-6
+
+
 def solve3(matrices: torch.Tensor, rhs: torch.Tensor) -> torch.Tensor:
     """x ``(..., 3)`` with ``matrices`` ``(..., 3, 3)`` · x = ``rhs`` ``(..., 3)``, by the
     adjugate (Cramer's rule): the blended skinning transforms are near rotations, and a batched
-    LAPACK solve of them took 3.6 times as long on 100k points."""
+    LAPACK solve of them took 3.6 times as long on 100k points. Where a matrix is singular
+    (determinant below :data:`SINGULAR`: two bones turned half a turn apart, blended half and
+    half) x is the least-squares solution of least norm (the pseudo-inverse's), not inf or NaN."""
     (a, b, c), (d, e, f), (g, h, i) = (row.unbind(-1) for row in matrices.unbind(-2))
     x, y, z = rhs.unbind(-1)
     # The adjugate's first column (the cofactors of the first row) gives the determinant.
@@ -120,4 +127,9 @@ def solve3(matrices: torch.Tensor, rhs: torch.Tensor) -> torch.Tensor:
     first = ei_fh * x + (c * h - b * i) * y + (b * f - c * e) * z
     second = fg_di * x + (a * i - c * g) * y + (c * d - a * f) * z
     third = dh_eg * x + (b * g - a * h) * y + (a * e - b * d) * z
-    return torch.stack((first, second, third), -1) / det[..., None]
+    out = torch.stack((first, second, third), -1) / det[..., None]
+    singular = det.abs() < SINGULAR
+    if bool(singular.any()):
+        pinv = torch.linalg.pinv(matrices[singular])
+        out[singular] = torch.einsum("mcd,md->mc", pinv, rhs[singular])
+    return out
