@@ -14,6 +14,7 @@ from types import FrameType
 import click
 
 from usd_garment import __version__
+from usd_garment.cli.allocator import keep_freed_memory
 
 #: Command name → ``module:attribute`` of its click command, under ``usd_garment.cli``.
 COMMANDS = {
@@ -53,6 +54,7 @@ class LazyGroup(click.Group):
 def main() -> None:
     """Dress animated SMPL bodies in USD with learned, collision-free garments."""
     signal.signal(signal.SIGTERM, _exit_on_sigterm)
+    keep_freed_memory()
 
 
 def _exit_on_sigterm(signum: int, _frame: FrameType | None) -> None:
