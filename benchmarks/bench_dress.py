@@ -49,11 +49,11 @@ from pathlib import Path
 
 import click
 import numpy as np
-import torch
 
 from usd_garment.body import load_body_model
 from usd_garment.cli.options import parse_betas
 from usd_garment.dress import dress
+from usd_garment.eval.machine import describe_machine, speed_readings
 from usd_garment.methods import GarmentMethod, get_method
 from usd_garment.methods.learned import LearnedMethod, default_method
 from usd_garment.motion.amass import load_amass
@@ -166,7 +166,8 @@ def main() -> None:
         betas = parse_betas(args.betas)
     except click.BadParameter as error:
         parser.error(f"--betas: {error.message}")
-    print(f"torch {torch.__version__}, {torch.get_num_threads()} threads")
+    readings = ", ".join(f"{k} {v:.3g}" for k, v in speed_readings().items())
+    print(f"{describe_machine()}; speed readings: {readings}")
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         body_usd = args.body

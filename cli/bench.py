@@ -3,8 +3,6 @@ run; a JSON and CSV table, the speed–accuracy chart and the per-frame collisio
 
 from __future__ import annotations
 
-import os
-import platform
 import time
 from pathlib import Path
 
@@ -17,6 +15,7 @@ from usd_garment.cli.options import measure_workers_option, split_list
 from usd_garment.eval.bench import BenchInput, BenchMethod, chart_table, run_bench, write_report
 from usd_garment.eval.bench_plots import plot_chart, plot_collision_curves
 from usd_garment.eval.body_distance import body_pool
+from usd_garment.eval.machine import describe_machine, speed_readings
 from usd_garment.eval.stress import LONG_FRAMES, write_stress_inputs
 from usd_garment.garment.template import GARMENT_NAMES, LODS
 from usd_garment.methods import available_methods
@@ -253,8 +252,8 @@ def bench(
     write_report(rows, output, source)
     context = click.get_current_context()
     options = {k: _plain(v) for k, v in context.params.items()}
-    machine = f"{platform.machine()}, {os.cpu_count()} cores"
-    measured = {**source, "command": context.command_path, "options": options, "machine": machine}
+    measured = {**source, "command": context.command_path, "options": options,
+                "machine": describe_machine(), "speed_readings": speed_readings()}  # fmt: skip
     shipped = [m.model for m in methods if m.label in LEARNED_METHODS and m.model is not None]
     if shipped:  # the table's learned entries are the shipped model's
         measured["model"] = model_identity(shipped[0])

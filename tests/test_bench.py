@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -105,6 +106,11 @@ def test_bench_command_writes_table_chart_and_curves(tmp_path: Path, walk: Path)
     source = json.loads((report / "budget.json").read_text())["source"]
     assert source["command"].endswith("bench") and source["options"]["lods"] == ["low", "medium"]
     assert "model" not in source  # no learned entry: no model to name
+    # What measured the speeds: the processor and its readings, so sessions can be compared.
+    assert "cores" in source["machine"] and "torch" in source["machine"]
+    readings = source["speed_readings"]
+    assert set(readings) == {"large_add_ms", "small_op_us", "matmul_gflops"}
+    assert all(math.isfinite(v) and v > 0 for v in readings.values())
 
 
 def test_a_failing_method_is_a_row_not_the_end(tmp_path: Path, walk: Path) -> None:

@@ -12,7 +12,6 @@ same folder, so ``train pose``, ``train vae`` and ``train regressor`` run one by
 from __future__ import annotations
 
 import json
-import platform
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
@@ -26,6 +25,7 @@ from usd_garment.atomic import atomic_output
 from usd_garment.body.fingerprint import model_fingerprint
 from usd_garment.body.model import BodyModel
 from usd_garment.canonical.dataset import CanonicalSet
+from usd_garment.eval.machine import describe_machine
 from usd_garment.fields.body_fields import BodyFields
 from usd_garment.generative.vae import GarmentVAE
 from usd_garment.methods.learned_model import (
@@ -297,7 +297,7 @@ def assemble_model(
             "training": {
                 "settings": settings.to_dict(),
                 "seconds": {stage: records[stage]["seconds"] for stage in STAGES},
-                "machine": f"{platform.machine()} {platform.processor() or ''}".strip(),
+                "machine": describe_machine(),
                 "torch": torch.__version__,
                 "data": {
                     "sequences": data.num_sequences,
