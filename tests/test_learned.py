@@ -676,6 +676,48 @@ def test_pushing_methods_push_the_vertices_they_write(
     assert read_garment_layer(tmp_path / "p.usdc")[0].shape == (4, low, 3)
 
 
+def test_posing_workers_stream_the_garment_of_one_process(
+    body_model: BodyModel, synthetic_body: BodyModel, tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:  # fmt: skip
+    """``learned+preimage`` with two forked workers (each chunk posed and pushed there while
+    this process decodes the next) streams the garment of one process to the bit, in chunks of
+    the size asked for, in order, with this process's torch threads as they were; a motion of
+    fewer than two chunks a worker is posed in this process."""
+    import usd_garment.methods.learned as learned
+    from usd_garment.methods.learned_posing import PosingPool, can_fork
+    from usd_garment.usd.read import read_smpl_motion
+
+    if body_model is synthetic_body:
+        pytest.skip("needs the embedded default body and its fields")
+    if not can_fork():
+        pytest.skip("the posing workers are forked")
+    submitted: list[int] = []
+    submit = PosingPool.submit
+
+    def spy(pool: PosingPool, x: torch.Tensor, *args: Any) -> Any:
+        submitted.append(len(x))
+        return submit(pool, x, *args)
+
+    monkeypatch.setattr(PosingPool, "submit", spy)
+    body = tmp_path / "walk.usda"
+    write_body_layer(body, make_motion("walk", 11, 30.0, seed=4, body=body_model), body_model)
+    motion, _ = read_smpl_motion(body, body_model)
+    template = load_template("tshirt", "low")
+    one = list(learned.LearnedPreimageMethod().predict_stream(motion, body_model, template, 3))
+    threads = torch.get_num_threads()
+    method = learned.LearnedPreimageMethod()
+    method.workers = 2
+    two = list(method.predict_stream(motion, body_model, template, 3))
+    assert submitted == [3, 3, 3, 2] and [len(p) for p in two] == [3, 3, 3, 2]
+    np.testing.assert_array_equal(np.concatenate(two), np.concatenate(one))
+    assert torch.get_num_threads() == threads and method.seconds["workers"] > 0
+    submitted.clear()
+    three = list(method.predict_stream(motion, body_model, template, 4))  # three chunks
+    assert submitted == [] and [len(p) for p in three] == [4, 4, 3]
+    assert method.seconds["workers"] == 0 and method.seconds["preimage"] > 0
+
+
 def test_coarser_levels_of_a_pushing_method_are_dressed_not_carried(
     body_model: BodyModel, synthetic_body: BodyModel, tmp_path: Path
 ) -> None:

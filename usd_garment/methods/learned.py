@@ -13,8 +13,10 @@ from __future__ import annotations
 
 import json
 import time
+from collections import deque
 from collections.abc import Iterator
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
+from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -40,6 +42,12 @@ from usd_garment.garment.model import GarmentModel
 from usd_garment.garment.template import LODS, GarmentTemplate
 from usd_garment.methods.base import Progress, predict_chunks
 from usd_garment.methods.learned_model import LearnedModel, ModelError, load_learned_model
+from usd_garment.methods.learned_posing import (
+    PosingPool,
+    available_cores,
+    can_fork,
+    pose_chunk,
+)
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.regressor.descriptor import MODEL_FPS, describe_motion
 
@@ -47,12 +55,10 @@ from usd_garment.regressor.descriptor import MODEL_FPS, describe_motion
 SHIPPED_MODELS = Path(__file__).resolve().parent.parent / "data" / "models"
 #: Frames decoded at once, sharing one first-order expansion of the body fields.
 FRAMES_PER_CHUNK = 256
-#: Frames posed at once within a chunk (bounds memory: ~N·(3 + 24 + 30) floats per frame).
-POSE_FRAMES = 64
 #: The stages :attr:`LearnedMethod.seconds` times.
 STAGES = (
     "load", "regressor", "decoder", "carry", "canonical", "fields", "posing", "preimage",
-    "push_out",
+    "workers", "push_out",
 )  # fmt: skip
 
 
@@ -175,6 +181,11 @@ class LearnedMethod:
     push_out = False
     #: Processes that push the garment out (one CPU core each; 1: this process).
     push_out_workers = 1
+    #: Forked processes that pose the chunks and push them out through the preimages, one CPU
+    #: core each, while this one decodes the next chunks and writes the last (the preimage
+    #: push only; at most one for every two chunks; 1: this process; ``learned_posing``).
+    #: The same garment to the bit.
+    workers = 1
 
     def __init__(
         self,
@@ -188,8 +199,9 @@ class LearnedMethod:
         self._fields = fields
         #: Seconds spent by the last :meth:`predict_stream` in each stage (the model's and the
         #: fields' loading, the pose code and GRU, the decoder, the carry to a coarser mesh,
-        #: the canonical push-out, the fields' linearization, the posing, the preimage push-out
-        #: and the push-out).
+        #: the canonical push-out, the fields' linearization, the posing, the preimage push-out,
+        #: the wait for the :attr:`workers` that pose and push in their place, and the
+        #: push-out).
         self.seconds: dict[str, float] = {}
 
     @property
@@ -316,7 +328,19 @@ class LearnedMethod:
         lap("load")
         z = predict_latents(model, motion)
         lap("regressor")
-        with body_pool(self.push_out_workers if self.push_out else 1) as pool:
+        posing = self._posing_pool(garment_model, betas, boxes, -(-t_frames // chunk))
+        pending: deque[Future[np.ndarray]] = deque()  # the chunks the workers have, in order
+
+        def collect() -> np.ndarray:
+            points = pending.popleft().result()
+            lap("workers")
+            return points
+
+        with (
+            body_pool(self.push_out_workers if self.push_out else 1) as pool,
+            posing or nullcontext(),
+            _threads_beside(posing.workers if posing is not None else 0),
+        ):
             for s in range(0, t_frames, chunk):
                 e = min(s + chunk, t_frames)
                 with torch.no_grad():
@@ -332,22 +356,21 @@ class LearnedMethod:
                         tangents = [Tangent(slice(0, e - s), None, 0.0)]
                     else:
                         tangents = _tangents(self._fields, x, tangents[-1] if tangents else None)
+                    parts = [(part.frames, part.tangent) for part in tangents]
                     lap("fields")
+                    if posing is not None:  # posed and pushed there, in the order given
+                        pending.append(posing.submit(x, parts, pose[s:e], trans[s:e]))
+                        while len(pending) > posing.workers:  # one chunk waits for a worker
+                            yield collect()
+                            clock[0] = time.perf_counter()
+                        continue
                     art = garment_model.articulation(betas, pose[s:e], trans[s:e])
-                    parts, unposed = [], []
-                    for part in tangents:
-                        # POSE_FRAMES at a time bounds the (t, N, channels) temporaries.
-                        for a in range(part.frames.start, part.frames.stop, POSE_FRAMES):
-                            b = slice(a, min(a + POSE_FRAMES, part.frames.stop))
-                            posed = garment_model.pose(x[b], art[b], part.tangent)
-                            parts.append(posed.vertices)
-                            unposed.append(posed.unposed)
-                    vertices = torch.cat(parts)
+                    vertices, unposed = pose_chunk(garment_model, x, parts, art)
                     lap("posing")
                     if boxes is not None:  # the whole chunk at once: fewer, larger steps
                         vertices = preimage_push(
-                            vertices, torch.cat(unposed), art.transforms, self._fields, betas,
-                            boxes, PUSH_OUT_EPS,
+                            vertices, unposed, art.transforms, self._fields, betas, boxes,
+                            PUSH_OUT_EPS,
                         )  # fmt: skip
                         lap("preimage")
                     points = vertices.numpy()
@@ -361,6 +384,43 @@ class LearnedMethod:
                     lap("push_out")
                 yield points
                 clock[0] = time.perf_counter()  # the consumer's time (writing) is not ours
+            while pending:
+                yield collect()
+                clock[0] = time.perf_counter()
+
+    def _posing_pool(
+        self,
+        garment_model: GarmentModel,
+        betas: torch.Tensor,
+        boxes: PartBoxes | None,
+        chunks: int,
+    ) -> PosingPool | None:
+        """Worker processes that pose and push the ``chunks`` chunks of a motion: at most
+        :attr:`workers`, two chunks or more each (a worker's one thread is slower than this
+        process's threads, and the first and the last chunk leave cores idle). None where this
+        process does: a method without the preimage push, fewer than two workers, or a
+        platform that cannot fork."""
+        workers = min(self.workers, chunks // 2)
+        if boxes is None or workers <= 1 or not can_fork():
+            return None
+        return PosingPool(workers, garment_model, betas, boxes, PUSH_OUT_EPS)
+
+
+@contextmanager
+def _threads_beside(workers: int) -> Iterator[None]:
+    """This process's torch threads limited to the CPU cores that ``workers`` busy worker
+    processes leave (at least one) for the time of the context: more threads than cores
+    spin against the workers (on two cores with two workers, two threads here took the
+    decoder and the USD write three to five times as long as one)."""
+    if workers == 0:
+        yield
+        return
+    threads = torch.get_num_threads()
+    torch.set_num_threads(max(1, min(threads, available_cores() - workers)))
+    try:
+        yield
+    finally:
+        torch.set_num_threads(threads)
 
 
 @dataclass(frozen=True)
