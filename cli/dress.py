@@ -111,9 +111,12 @@ QUALITY_LODS = {"draft": "low", "final": "high"}
     type=click.IntRange(1),
     default=1,
     show_default=True,
-    help="Processes that push the garment out of the body (the +postprocess methods, --quality "
-    "final), one CPU core each, ~2 s each to start; the same garment. The push-out is most of "
-    "their time: 1.4x faster with 2 workers on a 2-core machine (docs/judge.md).",
+    help="Processes that push the garment out of the body, one CPU core each; the same garment. "
+    "The +postprocess methods (--quality final): the winding-number push-out, ~2 s each to "
+    "start, 1.4x faster with 2 workers on a 2-core machine. learned+preimage (the default): "
+    "each chunk of 256 frames posed and pushed while this process decodes the next, at most "
+    "one worker for every two chunks (on 2 cores with 2 workers: 1.1-1.3x on a 4,000-frame "
+    "shot, 1.04x on 1,000 frames; docs/learning.md).",
 )
 @json_option()
 def dress(
@@ -167,13 +170,17 @@ def dress(
         learned = method in LEARNED_METHODS
         instance = learned_method(method, model) if learned else get_method(method)
     if workers > 1:
-        if not getattr(instance, "push_out", False):
+        if getattr(instance, "push_out", False):
+            instance.push_out_workers = workers
+        elif getattr(instance, "preimage", False):
+            instance.workers = workers
+        else:
             raise click.BadParameter(
-                f"{method} has no winding-number push-out to spread over processes: --workers "
-                "is for the +postprocess methods and --quality final",
+                f"{method} pushes nothing out of the body to spread over processes: --workers "
+                "is for learned+preimage (the default), the +postprocess methods and --quality "
+                "final",
                 param_hint="--workers",
             )
-        instance.push_out_workers = workers
     with FrameProgress(method) as bar, user_errors():
         result = dress_stage(
             input_path,

@@ -214,8 +214,7 @@ def test_error_budget_picks_the_fastest_method_that_meets_it(
 
 def test_workers_give_the_results_of_one_process(tmp_path: Path, body_model: BodyModel) -> None:
     """``dress --workers 2`` writes the garment of one process, ``eval --workers 2`` prints its
-    figures; a method without the winding-number push-out (lbs, the default learned+preimage)
-    refuses the option."""
+    figures; a method that pushes nothing out of the body (lbs, learned) refuses the option."""
     from usd_garment.usd.garment_read import read_garment_layer
 
     body = tmp_path / "body.usda"
@@ -240,5 +239,6 @@ def test_workers_give_the_results_of_one_process(tmp_path: Path, body_model: Bod
                             "--workers", "2"])  # fmt: skip
     assert code == 2 and "Invalid value for --workers" in stderr
     assert not (tmp_path / "no.usdc").exists()
-    code, _, stderr = _run(["dress", body, "-o", tmp_path / "no.usdc", "--workers", "2"])
-    assert code == 2 and "learned+preimage has no winding-number push-out" in stderr
+    code, _, stderr = _run(["dress", body, "-o", tmp_path / "no.usdc", "--method", "learned",
+                            "--workers", "2"])  # fmt: skip
+    assert code == 2 and "learned pushes nothing out of the body" in stderr
