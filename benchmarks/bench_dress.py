@@ -19,6 +19,10 @@ process with the default method writing every coarser level as a ``lod`` variant
 (``dress --lod-variants``: where the method pushes vertices out, each level dressed at its own),
 with its ratio to the plain layer.
 
+``--workers N`` also dresses the walk in process with ``learned+preimage`` posing and pushing
+each chunk in N forked worker processes (``dress --workers N``; at most one for every two
+chunks), with its ratio to one process, and gives the CLI runs ``--workers N``.
+
 ``--repeat N`` dresses in-process N times with each method and reports the fastest run (this
 machine's speed varies by tens of per cent from one run to the next).
 
@@ -33,7 +37,7 @@ shape offsets.
 Run: ``python benchmarks/bench_dress.py [--frames 1000 | --body LAYER] [--betas B1,B2,...]
 [--postprocess-frames 100]
 [--simulation-frames 30] [--model LABEL=DIR ...] [--repeat N] [--cli-repeat N]
-[--cli-method METHOD] [--cli-lod LOD] [--lods LOD ...] [--variants]``
+[--cli-method METHOD] [--cli-lod LOD] [--lods LOD ...] [--variants] [--workers N]``
 """
 
 from __future__ import annotations
@@ -112,13 +116,22 @@ def fastest(
     return best
 
 
+def with_workers(workers: int) -> GarmentMethod:
+    """``learned+preimage`` that poses and pushes in ``workers`` forked processes."""
+    method = get_method("learned+preimage")
+    assert isinstance(method, LearnedMethod)
+    method.workers = workers
+    return method
+
+
 def cli_runs(
     body_usd: Path, folder: Path, repeat: int, method: str | None, lod: str | None,
-    betas: str | None,
+    betas: str | None, workers: int,
 ) -> None:  # fmt: skip
     """``usd-garment dress`` (``--method method``, ``--lod lod``, ``--betas betas``; None: the
-    defaults) in a new interpreter ``repeat`` times: the stage processor's own figures and the
-    wall time with the interpreter's start and imports; then the median and the fastest run.
+    defaults; ``--workers workers``) in a new interpreter ``repeat`` times: the stage
+    processor's own figures and the wall time with the interpreter's start and imports; then
+    the median and the fastest run.
     Run before anything else writes to disk (a run right after the in-process dresses, which
     write ~150 MB, measured 25-40 % slower)."""
     walls = []
@@ -128,13 +141,14 @@ def cli_runs(
             [str(Path(sys.executable).with_name("usd-garment")), "dress", str(body_usd),
              "-o", str(folder / f"cli{i}.usdc"), "--json",
              *(["--method", method] if method else []), *(["--lod", lod] if lod else []),
-             *(["--betas", betas] if betas else [])],
+             *(["--betas", betas] if betas else []), "--workers", str(workers)],
             capture_output=True, text=True, check=True,
         )  # fmt: skip
         walls.append(time.perf_counter() - start)
         summary = json.loads(cli.stdout)
         frames = summary["frames"]
         label = f"{method or 'default method'}{f' --lod {lod}' if lod else ''}"
+        label += f" --workers {workers}" if workers > 1 else ""
         report(f"CLI run {i + 1}, {label}", summary)
         print(f"CLI run {i + 1} wall time incl. interpreter start: {walls[-1]:.2f} s, "
               f"{frames / walls[-1]:.1f} frames/s")  # fmt: skip
@@ -161,6 +175,8 @@ def main() -> None:
                         help="coarser levels the default also dresses in process")  # fmt: skip
     parser.add_argument("--variants", action="store_true",
                         help="also dress in process with --lod-variants")  # fmt: skip
+    parser.add_argument("--workers", type=int, default=1,
+                        help="also dress with learned+preimage's posing workers")  # fmt: skip
     args = parser.parse_args()
     try:
         betas = parse_betas(args.betas)
@@ -180,7 +196,8 @@ def main() -> None:
             print(f"built {args.frames}-frame body layer in {time.perf_counter() - start:.1f} s")
 
         default = default_method("tshirt", "high")
-        cli_runs(body_usd, folder, args.cli_repeat, args.cli_method, args.cli_lod, args.betas)
+        cli_runs(body_usd, folder, args.cli_repeat, args.cli_method, args.cli_lod, args.betas,
+                 args.workers)  # fmt: skip
         runs = {}
         best = f", fastest of {args.repeat} runs" if args.repeat > 1 else ""
         in_process = (default, "learned", "learned+canonical", "learned+preimage", "lbs")
@@ -191,6 +208,13 @@ def main() -> None:
             report(f"{method} (in-process{best})", runs[method])
             if isinstance(instance, LearnedMethod):
                 per_frame(instance.seconds, runs[method])
+        pooled = f"learned+preimage --workers {args.workers}"
+        if args.workers > 1:
+            runs[pooled], instance = fastest(lambda: with_workers(args.workers), body_usd,
+                                             folder / "workers.usdc", args.repeat,
+                                             betas=betas)  # fmt: skip
+            report(f"{pooled} (in-process{best})", runs[pooled])
+            per_frame(instance.seconds, runs[pooled])
         for lod in args.lods:
             label = f"{default} --lod {lod}"
             runs[label], instance = fastest(lambda: get_method(default), body_usd,
@@ -234,6 +258,9 @@ def main() -> None:
             ratio = fps[default] / fps[f"{default} --lod-variants"]
             print(f"ratio: {default} with --lod-variants takes {ratio:.2f}x the time of the plain "
                   "layer")  # fmt: skip
+        if args.workers > 1:
+            ratio = fps[pooled] / fps["learned+preimage"]
+            print(f"ratio: {pooled} is {ratio:.2f}x faster end to end than in one process")
         if default != "learned":
             print(f"ratio: learned (the networks alone) is {fps['learned'] / fps[default]:.2f}x "
                   f"faster end to end than {default}")  # fmt: skip
