@@ -16,7 +16,7 @@ import time
 from collections import deque
 from collections.abc import Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
-from contextlib import contextmanager, nullcontext
+from contextlib import closing, contextmanager, nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -338,7 +338,7 @@ class LearnedMethod:
 
         with (
             body_pool(self.push_out_workers if self.push_out else 1) as pool,
-            posing or nullcontext(),
+            closing(posing) if posing is not None else nullcontext(),
             _threads_beside(posing.workers if posing is not None else 0),
         ):
             for s in range(0, t_frames, chunk):

@@ -20,7 +20,6 @@ import os
 from collections.abc import Sequence
 from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass
-from types import TracebackType
 
 import numpy as np
 import torch
@@ -111,14 +110,15 @@ def _pose_and_push(
 
 
 def _tensor(array: np.ndarray) -> torch.Tensor:
+    """The tensor that shares ``array``'s memory."""
     return torch.from_numpy(array)
 
 
 class PosingPool:
     """``workers`` forked processes of one torch thread each that pose chunks of one motion's
-    canonical garment and push them out (:func:`pose_chunk`, then :func:`preimage_push`); use
-    as a context manager, or :meth:`close` it. The processes start at the first
-    :meth:`submit` and inherit the garment model and the rest of :class:`_Work` from the fork.
+    canonical garment and push them out (:func:`pose_chunk`, then :func:`preimage_push`), until
+    :meth:`close`. The processes start at the first :meth:`submit` and inherit the garment
+    model and the rest of :class:`_Work` from the fork.
 
     Raises:
         RuntimeError: the platform cannot fork (:func:`can_fork`).
@@ -157,14 +157,3 @@ class PosingPool:
     def close(self) -> None:
         """Stop the workers, dropping the chunks not started."""
         self._executor.shutdown(cancel_futures=True)
-
-    def __enter__(self) -> PosingPool:
-        return self
-
-    def __exit__(
-        self,
-        kind: type[BaseException] | None,
-        error: BaseException | None,
-        trace: TracebackType | None,
-    ) -> None:
-        self.close()
