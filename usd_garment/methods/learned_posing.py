@@ -121,7 +121,8 @@ class PosingPool:
     model and the rest of :class:`_Work` from the fork.
 
     Raises:
-        RuntimeError: the platform cannot fork (:func:`can_fork`).
+        ValueError: the platform cannot fork (:func:`can_fork`; ``multiprocessing``'s own
+            error).
     """
 
     def __init__(
@@ -132,8 +133,6 @@ class PosingPool:
         boxes: PartBoxes,
         epsilon: float,
     ) -> None:
-        if not can_fork():
-            raise RuntimeError("worker processes for posing need fork()")
         self.workers = workers
         self._executor = ProcessPoolExecutor(
             workers, mp_context=multiprocessing.get_context("fork"), initializer=_start,
