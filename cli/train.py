@@ -307,15 +307,29 @@ def compare(runs: tuple[Path, ...], output: Path) -> None:
     help="Standard deviation of a Gaussian that smooths the latent codes in time before "
     "decoding (0: none).",
 )
+@click.option(
+    "--posed-smoothing",
+    type=click.FloatRange(min=0.0),
+    default=0.0,
+    show_default=True,
+    metavar="SECONDS",
+    help="Standard deviation of a Gaussian that smooths the posed garment in time before any "
+    "push-out (0: none).",
+)
 def combine(
-    models: tuple[Path, ...], out: Path, version: str | None, latent_smoothing: float
+    models: tuple[Path, ...],
+    out: Path,
+    version: str | None,
+    latent_smoothing: float,
+    posed_smoothing: float,
 ) -> None:
     """One model whose garment is the mean of the canonical garments of MODELS (trained on the
     same garment and body, e.g. with other seeds): each model's networks run, their decodings
     are averaged and posed once. Each member keeps its own training command and figures; its
     training curves and log are copied beside the model (curves_member{i}.png,
     train_member{i}.log). With --latent-smoothing the codes are smoothed in time first (the
-    shipped dress: 0.1 s, docs/learning.md)."""
+    shipped dress: 0.1 s, docs/learning.md); with --posed-smoothing the posed garment is, before
+    it is pushed out of the body."""
     with user_errors():
         from usd_garment.methods.learned_model import (
             combine_models,
@@ -325,10 +339,10 @@ def combine(
 
         if any(out.resolve() == path.resolve() for path in models):
             raise click.BadParameter(f"{out} is one of the models combined", param_hint="--out")
-        model = combine_models(list(models), version, latent_smoothing)
+        model = combine_models(list(models), version, latent_smoothing, posed_smoothing)
         model.info["command"] = "usd-garment " + shlex.join(
             ["train", "combine", *map(str, models), "--out", str(out), "--version", model.version,
-             "--latent-smoothing", str(latent_smoothing)]
+             "--latent-smoothing", str(latent_smoothing), "--posed-smoothing", str(posed_smoothing)]
         )  # fmt: skip
         save_learned_model(out, model)
         records = copy_member_records(list(models), out)

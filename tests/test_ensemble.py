@@ -161,6 +161,48 @@ def test_latent_smoothing_is_a_gaussian_over_the_codes_at_30_fps(tmp_path, body,
     assert load_learned_model(out).latent_smoothing == 0.0
 
 
+def test_posed_smoothing_is_a_gaussian_over_the_posed_frames(tmp_path, body, template):
+    """``train combine --posed-smoothing S``: the posed garment is smoothed by a Gaussian of S
+    seconds at the input's frame rate, the nearest frame repeated at the ends, and a motion
+    streamed in chunks is smoothed as it is whole (each chunk posed with the frames around it
+    that the Gaussian reaches); ``train member`` keeps it; a negative one is refused."""
+    from usd_garment.methods.learned import LearnedMethod
+
+    first, second = _members(tmp_path, body, template)
+    out = tmp_path / "smoothed"
+    code, output = _run(["train", "combine", first, second, "--out", out,
+                         "--posed-smoothing", "0.05"])  # fmt: skip
+    assert code == 0, output
+    info = json.loads((out / "model.json").read_text())
+    assert info["posed_smoothing_s"] == 0.05 and "--posed-smoothing 0.05" in info["command"]
+    assert info["latent_smoothing_s"] == 0.0
+    plain_dir = tmp_path / "plain"
+    assert _run(["train", "combine", first, second, "--out", plain_dir])[0] == 0
+    motion = make_motion("walk", 40, 30.0, seed=2, body=body)
+    smoothed = LearnedMethod(out, exact_fields=True).predict_stream(motion, body, template, 7)
+    chunks = list(smoothed)
+    assert [len(c) for c in chunks] == [7] * 5 + [5]
+    whole = LearnedMethod(plain_dir, exact_fields=True).predict_stream(motion, body, template, 40)
+    raw = np.concatenate(list(whole))
+    # 0.05 s at 30 fps: σ = 1.5 frames, reaching int(4 σ + 0.5) = 6 frames around each chunk.
+    expected = gaussian_filter1d(raw, 1.5, axis=0, mode="nearest")
+    np.testing.assert_allclose(np.concatenate(chunks), expected, atol=2e-5)
+    assert np.abs(np.diff(expected, n=2, axis=0)).mean() < np.abs(np.diff(raw, n=2, axis=0)).mean()
+    assert _run(["train", "member", out, "--index", "1", "--out", tmp_path / "m1"])[0] == 0
+    assert load_learned_model(tmp_path / "m1").posed_smoothing == 0.05
+
+    code, output = _run(["train", "combine", first, second, "--out", tmp_path / "x",
+                         "--posed-smoothing", "-1"])  # fmt: skip
+    assert code == 2 and "-1" in output and not (tmp_path / "x").exists(), output
+    info["posed_smoothing_s"] = float("nan")
+    (out / "model.json").write_text(json.dumps(info))
+    with pytest.raises(ModelError, match="posed_smoothing_s must be a finite number"):
+        load_learned_model(out)
+    del info["posed_smoothing_s"]  # models written before the setting: no smoothing
+    (out / "model.json").write_text(json.dumps(info))
+    assert load_learned_model(out).posed_smoothing == 0.0
+
+
 def test_saved_model_files_get_the_usual_permissions(tmp_path, body, template):
     """safetensors makes its file 0600; a saved model is readable as any output (umask)."""
     (path,) = _members(tmp_path, body, template)[:1]

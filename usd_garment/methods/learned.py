@@ -44,6 +44,7 @@ from usd_garment.methods.base import Progress, predict_chunks
 from usd_garment.methods.learned_model import LearnedModel, ModelError, load_learned_model
 from usd_garment.methods.learned_posing import (
     PosingPool,
+    Smoothing,
     available_cores,
     can_fork,
     pose_chunk,
@@ -281,7 +282,9 @@ class LearnedMethod:
     ) -> Iterator[np.ndarray]:
         """Posed garment points in consecutive chunks ``(t ≤ chunk, N, 3)`` float32 (m): the
         latent codes of the whole motion first (the GRU, ``(T, L)``: small), then each chunk
-        decoded and posed. A ``template`` coarser than the model's level of detail gets the
+        decoded and posed (with the frames around it that the model's posed smoothing reaches,
+        which smooths the chunk as it would the whole motion: ``Smoothing``), then pushed out
+        where the method does. A ``template`` coarser than the model's level of detail gets the
         model's garment carried down to it (``carry_to_lod``): with the preimage push, the
         decoded canonical garment, before anything else (the pushes, the fields and the posing
         then work on the vertices written); else the posed garment (a draft from the same
@@ -327,6 +330,7 @@ class LearnedMethod:
         tangents: list[Tangent] = []  # the last one is kept across chunks (_tangents)
         lap("load")
         z = predict_latents(model, motion)
+        smoothing = Smoothing.of(model.posed_smoothing, motion.fps)
         lap("regressor")
         posing = self._posing_pool(garment_model, betas, boxes, -(-t_frames // chunk))
         pending: deque[Future[np.ndarray]] = deque()  # the chunks the workers have, in order
@@ -343,8 +347,11 @@ class LearnedMethod:
         ):
             for s in range(0, t_frames, chunk):
                 e = min(s + chunk, t_frames)
+                # the chunk and the frames around it that its smoothing reaches
+                a, b = max(0, s - smoothing.radius), min(t_frames, e + smoothing.radius)
+                core = slice(s - a, e - a)
                 with torch.no_grad():
-                    x = model.decode(z[s:e])
+                    x = model.decode(z[a:b])
                     lap("decoder")
                     if early:
                         x = torch.from_numpy(carry_to_lod(x.numpy(), *lods))
@@ -353,24 +360,26 @@ class LearnedMethod:
                         x = push_out_canonical(x, self._fields.sdf)
                         lap("canonical")
                     if self.exact_fields:
-                        tangents = [Tangent(slice(0, e - s), None, 0.0)]
+                        tangents = [Tangent(slice(0, b - a), None, 0.0)]
                     else:
                         tangents = _tangents(self._fields, x, tangents[-1] if tangents else None)
                     parts = [(part.frames, part.tangent) for part in tangents]
                     lap("fields")
                     if posing is not None:  # posed and pushed there, in the order given
-                        pending.append(posing.submit(x, parts, pose[s:e], trans[s:e]))
+                        work = (x, parts, pose[a:b], trans[a:b], core, smoothing)
+                        pending.append(posing.submit(*work))
                         while len(pending) > posing.workers:  # one chunk waits for a worker
                             yield collect()
                             clock[0] = time.perf_counter()
                         continue
-                    art = garment_model.articulation(betas, pose[s:e], trans[s:e])
+                    art = garment_model.articulation(betas, pose[a:b], trans[a:b])
                     vertices, unposed = pose_chunk(garment_model, x, parts, art)
+                    vertices = smoothing.apply(vertices, core)
                     lap("posing")
                     if boxes is not None:  # the whole chunk at once: fewer, larger steps
                         vertices = preimage_push(
-                            vertices, unposed, art.transforms, self._fields, betas, boxes,
-                            PUSH_OUT_EPS,
+                            vertices, unposed[core], art.transforms[core], self._fields, betas,
+                            boxes, PUSH_OUT_EPS,
                         )  # fmt: skip
                         lap("preimage")
                     points = vertices.numpy()

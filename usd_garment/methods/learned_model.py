@@ -8,7 +8,9 @@ seeds, other sizes): the model's garment is the mean of the members' canonical g
 once (an ensemble; :func:`combine_models` makes one from trained models).
 
 A model may smooth its latent codes in time before decoding (``latent_smoothing_s``: the standard
-deviation, in seconds, of a Gaussian over the codes at the model's 30 fps; 0, no smoothing).
+deviation, in seconds, of a Gaussian over the codes at the model's 30 fps; 0, no smoothing), and
+its posed garment before any push-out (``posed_smoothing_s``: the same over the posed vertices at
+the input's frame rate; 0, none).
 
 ``model.json`` also carries what a person needs to trust it: the command and configuration that
 trained it (each member's, for an ensemble), the training wall time and machine, and its
@@ -43,8 +45,11 @@ READ_FORMATS = (1, 2)
 #: The keys of ``model.json`` that describe the layout rather than the model's history.
 _LAYOUT_KEYS = frozenset(
     ("format", "garment", "lod", "vertices", "version", "body", "architecture", "members",
-     "latent_smoothing_s")
+     "latent_smoothing_s", "posed_smoothing_s")
 )  # fmt: skip
+#: The keys of ``model.json`` that hold smoothings in time (s); a model written before one was
+#: added has none (0).
+SMOOTHING_KEYS = ("latent_smoothing_s", "posed_smoothing_s")
 CONFIG_NAME = "model.json"
 WEIGHTS_NAME = "weights.safetensors"
 #: A training run's pictures and plain-text log beside its model files; an ensemble keeps its
@@ -96,6 +101,9 @@ class LearnedModel:
         body_name, body_fingerprint: the body model it was trained for.
         latent_smoothing: standard deviation (s) of the Gaussian that smooths the codes in time
             before decoding (:func:`~usd_garment.methods.learned.predict_latents`); 0: none.
+        posed_smoothing: standard deviation (s) of the Gaussian that smooths the posed garment
+            in time before it is pushed out of the body
+            (:class:`~usd_garment.methods.learned_posing.Smoothing`); 0: none.
         info: everything else of ``model.json`` (training command, config, wall time, machine,
             held-out figures).
     """
@@ -108,6 +116,7 @@ class LearnedModel:
     body_name: str
     body_fingerprint: str
     latent_smoothing: float = 0.0
+    posed_smoothing: float = 0.0
     info: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -170,6 +179,7 @@ def save_learned_model(
         "version": model.version,
         "body": {"name": model.body_name, "fingerprint": model.body_fingerprint},
         "latent_smoothing_s": model.latent_smoothing,
+        "posed_smoothing_s": model.posed_smoothing,
         "members": members,
         **model.info,
     }
@@ -222,10 +232,11 @@ def load_learned_model(path: str | Path, body: BodyModel | None = None) -> Learn
         ]
         meta = {k: config[k] for k in ("garment", "lod", "vertices", "version")}
         body_name, fingerprint = config["body"]["name"], config["body"]["fingerprint"]
-        smoothing = float(config.get("latent_smoothing_s", 0.0))
+        smoothing = {k: float(config.get(k, 0.0)) for k in SMOOTHING_KEYS}
     except (KeyError, TypeError, ValueError, RuntimeError) as exc:
         raise ModelError(f"{path}: model files do not match ({exc})") from None
-    _check_smoothing(smoothing, f"{path}: ")
+    for key, seconds in smoothing.items():
+        _check_smoothing(seconds, f"{path}: ", key)
     if not members:
         raise ModelError(f"{path}: a model with no members")
     info = {k: v for k, v in config.items() if k not in _LAYOUT_KEYS}
@@ -234,7 +245,8 @@ def load_learned_model(path: str | Path, body: BodyModel | None = None) -> Learn
         **meta,
         body_name=body_name,
         body_fingerprint=fingerprint,
-        latent_smoothing=smoothing,
+        latent_smoothing=smoothing["latent_smoothing_s"],
+        posed_smoothing=smoothing["posed_smoothing_s"],
         info=info,
     )
     if body is not None:
@@ -242,11 +254,11 @@ def load_learned_model(path: str | Path, body: BodyModel | None = None) -> Learn
     return model
 
 
-def _check_smoothing(seconds: float, where: str = "") -> None:
-    """Raise :class:`ModelError` unless ``seconds`` is a usable
-    :attr:`LearnedModel.latent_smoothing`: finite and ≥ 0 (``where`` prefixes the message)."""
+def _check_smoothing(seconds: float, where: str = "", key: str = "latent_smoothing_s") -> None:
+    """Raise :class:`ModelError` unless ``seconds`` is a usable smoothing (``model.json``'s
+    ``key``): finite and ≥ 0 (``where`` prefixes the message)."""
     if not (np.isfinite(seconds) and seconds >= 0):
-        raise ModelError(f"{where}latent_smoothing_s must be a finite number ≥ 0, not {seconds}")
+        raise ModelError(f"{where}{key} must be a finite number ≥ 0, not {seconds}")
 
 
 def _load_member(entry: dict[str, Any], tensors: dict[str, torch.Tensor], prefix: str) -> Member:
@@ -268,7 +280,10 @@ def _load_member(entry: dict[str, Any], tensors: dict[str, torch.Tensor], prefix
 
 
 def combine_models(
-    paths: list[str | Path], version: str | None = None, latent_smoothing: float = 0.0
+    paths: list[str | Path],
+    version: str | None = None,
+    latent_smoothing: float = 0.0,
+    posed_smoothing: float = 0.0,
 ) -> LearnedModel:
     """One model whose members are those of the model directories ``paths`` (an ensemble: its
     garment is the mean of theirs). Each member keeps what its model's ``model.json`` said of
@@ -278,14 +293,16 @@ def combine_models(
     Args:
         version: the combined model's version (None: the first model's, with ``-ensemble``).
         latent_smoothing: the combined model's :attr:`LearnedModel.latent_smoothing` (s).
+        posed_smoothing: its :attr:`LearnedModel.posed_smoothing` (s).
 
     Raises:
         ModelError: fewer than two models, an unreadable one, models of another garment,
-            level of detail or body than the first, or a negative ``latent_smoothing``.
+            level of detail or body than the first, or a negative smoothing.
     """
     if len(paths) < 2:
         raise ModelError("combining needs at least two models")
     _check_smoothing(latent_smoothing)
+    _check_smoothing(posed_smoothing, key="posed_smoothing_s")
     models = [load_learned_model(path) for path in paths]
     first = models[0]
     members = []
@@ -312,6 +329,7 @@ def combine_models(
         body_name=first.body_name,
         body_fingerprint=first.body_fingerprint,
         latent_smoothing=latent_smoothing,
+        posed_smoothing=posed_smoothing,
     )
 
 
@@ -323,7 +341,7 @@ def _member_name(name: str, index: int) -> str:
 
 def member_model(model: LearnedModel, index: int) -> LearnedModel:
     """The one-member model of ``model``'s member ``index`` (0-based), to run or bench it alone:
-    its networks and record, ``model``'s garment, body and latent smoothing, version
+    its networks and record, ``model``'s garment, body and smoothings, version
     ``{version}-member{index}``, its own ``info`` empty (the caller records how it was made).
 
     Raises:

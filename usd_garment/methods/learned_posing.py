@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
+from scipy.ndimage import gaussian_filter1d
 
 from usd_garment.canonical.preimage_push import PartBoxes, preimage_push
 from usd_garment.fields.body_fields import FieldTangent
@@ -50,6 +51,40 @@ def pose_chunk(
             vertices.append(posed.vertices)
             unposed.append(posed.unposed)
     return torch.cat(vertices), torch.cat(unposed)
+
+
+#: The Gaussian of :class:`Smoothing` reaches this many standard deviations (scipy's default).
+TRUNCATE = 4.0
+
+
+@dataclass(frozen=True)
+class Smoothing:
+    """A Gaussian of ``sigma`` frames over the frames of a posed garment (``LearnedModel``'s
+    ``posed_smoothing`` at the input's frame rate; 0: none), the nearest frame repeated beyond
+    the motion's ends. A chunk of frames is smoothed as the whole motion would be where it is
+    posed with :attr:`radius` frames of the motion on each side (fewer at its ends)."""
+
+    sigma: float = 0.0
+
+    @classmethod
+    def of(cls, seconds: float, fps: float) -> Smoothing:
+        """The smoothing of ``seconds`` (standard deviation) at ``fps`` frames a second."""
+        return cls(seconds * fps)
+
+    @property
+    def radius(self) -> int:
+        """Frames of the motion the Gaussian reaches on each side of a frame."""
+        return int(TRUNCATE * self.sigma + 0.5) if self.sigma > 0 else 0
+
+    def apply(self, points: torch.Tensor, core: slice) -> torch.Tensor:
+        """The frames ``core`` of ``points`` ``(t, N, 3)`` (a chunk and the frames of the
+        motion around it), smoothed."""
+        if self.sigma <= 0:
+            return points[core]
+        smoothed = gaussian_filter1d(
+            points.numpy(), self.sigma, axis=0, mode="nearest", truncate=TRUNCATE
+        )
+        return torch.from_numpy(smoothed[core])
 
 
 def available_cores() -> int:
@@ -91,9 +126,15 @@ def _start(work: _Work) -> None:
 
 
 def _pose_and_push(
-    x: np.ndarray, parts: list[_PartState], pose: np.ndarray, trans: np.ndarray
+    x: np.ndarray,
+    parts: list[_PartState],
+    pose: np.ndarray,
+    trans: np.ndarray,
+    core: slice,
+    smoothing: Smoothing,
 ) -> np.ndarray:
-    """One chunk in a worker: posed (:func:`pose_chunk`), then :func:`preimage_push`."""
+    """One chunk in a worker: posed (:func:`pose_chunk`), its frames ``core`` smoothed, then
+    :func:`preimage_push`."""
     work = _WORK[0]
     fields = work.garment_model.fields
     tangents = [
@@ -104,8 +145,9 @@ def _pose_and_push(
         art = work.garment_model.articulation(work.betas, _tensor(pose), _tensor(trans))
         vertices, unposed = pose_chunk(work.garment_model, _tensor(x), tangents, art)
         pushed = preimage_push(
-            vertices, unposed, art.transforms, fields, work.betas, work.boxes, work.epsilon
-        )
+            smoothing.apply(vertices, core), unposed[core], art.transforms[core], fields,
+            work.betas, work.boxes, work.epsilon,
+        )  # fmt: skip
     return pushed.numpy()
 
 
@@ -140,18 +182,27 @@ class PosingPool:
         )  # fmt: skip
 
     def submit(
-        self, x: torch.Tensor, parts: Sequence[Part], pose: torch.Tensor, trans: torch.Tensor
+        self,
+        x: torch.Tensor,
+        parts: Sequence[Part],
+        pose: torch.Tensor,
+        trans: torch.Tensor,
+        core: slice,
+        smoothing: Smoothing,
     ) -> Future[np.ndarray]:
-        """The posed and pushed garment ``(t, N, 3)`` float32 (m) of the canonical garments
-        ``x`` ``(t, N, 3)`` posed by ``pose`` ``(t, J, 3)`` (rad) and ``trans`` ``(t, 3)`` (m),
-        each part of the frames with its tangent, to come."""
+        """The posed and pushed garment ``(c, N, 3)`` float32 (m) of the frames ``core`` (c of
+        them) of the canonical garments ``x`` ``(t, N, 3)`` posed by ``pose`` ``(t, J, 3)``
+        (rad) and ``trans`` ``(t, 3)`` (m), each part of the frames with its tangent, and
+        smoothed, to come."""
         states: list[_PartState] = [
             (frames.start, frames.stop, None if t is None else (
                 t.anchor.numpy(), t.value.numpy(), t.derivative.numpy(), t.sizes, t.radius,
             ))
             for frames, t in parts
         ]  # fmt: skip
-        return self._executor.submit(_pose_and_push, x.numpy(), states, pose.numpy(), trans.numpy())
+        return self._executor.submit(
+            _pose_and_push, x.numpy(), states, pose.numpy(), trans.numpy(), core, smoothing
+        )
 
     def close(self) -> None:
         """Stop the workers, dropping the chunks not started."""
