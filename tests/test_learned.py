@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 import torch
 from click.testing import CliRunner
+from scipy.ndimage import gaussian_filter1d
 
 from tests.script_calls import script_calls
 from usd_garment.body.fingerprint import model_fingerprint
@@ -760,3 +761,38 @@ def test_the_methods_that_push_vertices_out_say_so() -> None:
 
     pushing = {m for m in available_methods() if pushes_vertices(get_method(m))}
     assert pushing == {"lbs+postprocess", "learned+preimage", "learned+postprocess"}
+
+
+def test_posed_smoothing_keeps_a_vertex_out_of_its_own_part() -> None:
+    """A vertex 2.5 mm outside a ball that it circles by 20° a frame: its smoothed positions
+    (a Gaussian of one frame) cut into the ball (the mean of points on an arc lies inside
+    it); with the canonical body's SDF each is moved back ε = 2 mm out, along with the point
+    before skinning that skins to it; frames of the motion around the chunk take part."""
+    from usd_garment.garment.model import GarmentOutput
+    from usd_garment.generative.losses import COLLISION_EPSILON
+    from usd_garment.methods.learned_posing import Smoothing
+
+    smoothing = Smoothing.of(1 / 30, 30.0)
+    assert smoothing.sigma == 1.0 and smoothing.radius == 4
+    assert Smoothing.of(1 / 60, 30.0).radius == 2 and Smoothing().radius == 0
+    angle = torch.arange(13, dtype=torch.float32) * (20 * np.pi / 180)
+    circle = torch.stack([torch.cos(angle), torch.sin(angle), torch.zeros(13)], -1)
+    x = (0.1025 * circle)[:, None]  # (13, 1, 3): one vertex, skinned by one joint, unmoved
+    posed = GarmentOutput(x, x, torch.ones(13, 1, 1))
+    skin = torch.eye(4).expand(13, 1, 4, 4)
+
+    def ball(p: torch.Tensor) -> torch.Tensor:
+        return p.norm(dim=-1) - 0.1
+
+    core = slice(4, 9)
+    cut, _ = smoothing.apply(x, posed, skin, core, None)
+    assert bool((cut.norm(dim=-1) < 0.1).all())  # inside the ball on every frame
+    whole = torch.from_numpy(gaussian_filter1d(x.numpy(), 1.0, axis=0, mode="nearest"))
+    torch.testing.assert_close(cut, whole[core])
+    kept, unposed = smoothing.apply(x, posed, skin, core, ball)
+    torch.testing.assert_close(kept.norm(dim=-1), torch.full((5, 1), 0.1 + COLLISION_EPSILON))
+    torch.testing.assert_close(unposed, kept)  # the identity skins it to itself
+    direction = cut / cut.norm(dim=-1, keepdim=True)
+    torch.testing.assert_close(kept / kept.norm(dim=-1, keepdim=True), direction)  # straight out
+    plain, same = Smoothing().apply(x, posed, skin, core, ball)
+    assert torch.equal(plain, x[core]) and torch.equal(same, x[core])

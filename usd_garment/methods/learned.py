@@ -373,13 +373,14 @@ class LearnedMethod:
                             clock[0] = time.perf_counter()
                         continue
                     art = garment_model.articulation(betas, pose[a:b], trans[a:b])
-                    vertices, unposed = pose_chunk(garment_model, x, parts, art)
-                    vertices = smoothing.apply(vertices, core)
+                    posed = pose_chunk(garment_model, x, parts, art)
+                    sdf = self._fields.sdf if self.canonical_push else None
+                    vertices, unposed = smoothing.apply(x, posed, art.transforms, core, sdf)
                     lap("posing")
                     if boxes is not None:  # the whole chunk at once: fewer, larger steps
                         vertices = preimage_push(
-                            vertices, unposed[core], art.transforms[core], self._fields, betas,
-                            boxes, PUSH_OUT_EPS,
+                            vertices, unposed, art.transforms[core], self._fields, betas, boxes,
+                            PUSH_OUT_EPS,
                         )  # fmt: skip
                         lap("preimage")
                     points = vertices.numpy()

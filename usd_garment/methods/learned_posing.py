@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass
 
@@ -25,9 +25,11 @@ import numpy as np
 import torch
 from scipy.ndimage import gaussian_filter1d
 
+from usd_garment.body.lbs import inverse_skin
 from usd_garment.canonical.preimage_push import PartBoxes, preimage_push
+from usd_garment.canonical.push_out import push_out_canonical
 from usd_garment.fields.body_fields import FieldTangent
-from usd_garment.garment.model import Articulation, GarmentModel
+from usd_garment.garment.model import Articulation, GarmentModel, GarmentOutput
 
 #: Frames posed at once within a chunk (bounds memory: ~N·(3 + 24 + 30) floats per frame).
 POSE_FRAMES = 64
@@ -39,18 +41,20 @@ Part = tuple[slice, FieldTangent | None]
 
 def pose_chunk(
     garment_model: GarmentModel, x: torch.Tensor, parts: Sequence[Part], art: Articulation
-) -> tuple[torch.Tensor, torch.Tensor]:
+) -> GarmentOutput:
     """The posed garment ``(t, N, 3)`` of the canonical garments ``x`` ``(t, N, 3)`` (m) of a
-    chunk, and the points before skinning ``(t, N, 3)`` (``GarmentOutput.unposed``), each part
-    of its frames with its tangent and :data:`POSE_FRAMES` frames at a time."""
-    vertices, unposed = [], []
+    chunk, with the points before skinning and the skinning weights, each part of its frames
+    with its tangent and :data:`POSE_FRAMES` frames at a time."""
+    out: list[GarmentOutput] = []
     for frames, tangent in parts:
         for a in range(frames.start, frames.stop, POSE_FRAMES):
             b = slice(a, min(a + POSE_FRAMES, frames.stop))
-            posed = garment_model.pose(x[b], art[b], tangent)
-            vertices.append(posed.vertices)
-            unposed.append(posed.unposed)
-    return torch.cat(vertices), torch.cat(unposed)
+            out.append(garment_model.pose(x[b], art[b], tangent))
+    return GarmentOutput(
+        torch.cat([o.vertices for o in out]),
+        torch.cat([o.unposed for o in out]),
+        torch.cat([o.weights for o in out]),
+    )
 
 
 #: The Gaussian of :class:`Smoothing` reaches this many standard deviations (scipy's default).
@@ -76,15 +80,42 @@ class Smoothing:
         """Frames of the motion the Gaussian reaches on each side of a frame."""
         return int(TRUNCATE * self.sigma + 0.5) if self.sigma > 0 else 0
 
-    def apply(self, points: torch.Tensor, core: slice) -> torch.Tensor:
-        """The frames ``core`` of ``points`` ``(t, N, 3)`` (a chunk and the frames of the
-        motion around it), smoothed."""
+    def apply(
+        self,
+        x: torch.Tensor,
+        posed: GarmentOutput,
+        transforms: torch.Tensor,
+        core: slice,
+        sdf: Callable[[torch.Tensor], torch.Tensor] | None,
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """The posed garment ``(c, N, 3)`` of the frames ``core`` (c of them) of ``posed`` (a
+        chunk and the frames of the motion around it, ``(t, N, ·)``, posed from the canonical
+        garments ``x`` ``(t, N, 3)`` by ``transforms`` ``(t, J, 4, 4)``), smoothed, and the
+        points before skinning ``(c, N, 3)`` that skin to it.
+
+        With the canonical body's ``sdf``, a smoothed vertex cannot end inside its own body
+        part: the mean of a vertex's positions over neighbouring frames lies inside the curve
+        it follows, and a fast limb's sleeve is carried into the limb, where the preimage push
+        (which leaves each vertex's own preimage out of its search) would not find it. So each
+        smoothed vertex's own preimage is found again, to first order (one inverse skinning with
+        its weights), pushed ε out of the canonical body where it is less (as the decoded
+        garment was: :func:`push_out_canonical`), and the vertex moved with it."""
         if self.sigma <= 0:
-            return points[core]
-        smoothed = gaussian_filter1d(
-            points.numpy(), self.sigma, axis=0, mode="nearest", truncate=TRUNCATE
+            return posed.vertices[core], posed.unposed[core]
+        vertices = torch.from_numpy(
+            gaussian_filter1d(
+                posed.vertices.numpy(), self.sigma, axis=0, mode="nearest", truncate=TRUNCATE
+            )[core]
         )
-        return torch.from_numpy(smoothed[core])
+        weights, skin = posed.weights[core], transforms[core]
+        unposed = inverse_skin(vertices, weights, skin)  # (c, N, 3): shaped rest frame
+        if sdf is None:
+            return vertices, unposed
+        shaped = posed.unposed[core] - x[core]  # the shape offsets B̃s(X)·β
+        canonical = unposed - shaped
+        move = push_out_canonical(canonical, sdf) - canonical  # (c, N, 3), zero for most
+        rotation = torch.einsum("cnj,cjab->cnab", weights, skin[..., :3, :3])
+        return vertices + torch.einsum("cnab,cnb->cna", rotation, move), unposed + move
 
 
 def available_cores() -> int:
@@ -143,10 +174,12 @@ def _pose_and_push(
     ]
     with torch.no_grad():
         art = work.garment_model.articulation(work.betas, _tensor(pose), _tensor(trans))
-        vertices, unposed = pose_chunk(work.garment_model, _tensor(x), tangents, art)
+        canonical = _tensor(x)
+        posed = pose_chunk(work.garment_model, canonical, tangents, art)
+        vertices, unposed = smoothing.apply(canonical, posed, art.transforms, core, fields.sdf)
         pushed = preimage_push(
-            smoothing.apply(vertices, core), unposed[core], art.transforms[core], fields,
-            work.betas, work.boxes, work.epsilon,
+            vertices, unposed, art.transforms[core], fields, work.betas, work.boxes,
+            work.epsilon,
         )  # fmt: skip
     return pushed.numpy()
 
