@@ -768,7 +768,6 @@ def test_posed_smoothing_keeps_a_vertex_out_of_its_own_part() -> None:
     (a Gaussian of one frame) cut into the ball (the mean of points on an arc lies inside
     it); with the canonical body's SDF each is moved back ε = 2 mm out, along with the point
     before skinning that skins to it; frames of the motion around the chunk take part."""
-    from usd_garment.garment.model import GarmentOutput
     from usd_garment.generative.losses import COLLISION_EPSILON
     from usd_garment.methods.learned_posing import Smoothing
 
@@ -778,7 +777,7 @@ def test_posed_smoothing_keeps_a_vertex_out_of_its_own_part() -> None:
     angle = torch.arange(13, dtype=torch.float32) * (20 * np.pi / 180)
     circle = torch.stack([torch.cos(angle), torch.sin(angle), torch.zeros(13)], -1)
     x = (0.1025 * circle)[:, None]  # (13, 1, 3): one vertex, skinned by one joint, unmoved
-    posed = GarmentOutput(x, x, torch.ones(13, 1, 1))
+    posed = (x, x, torch.ones(13, 1, 1))
     skin = torch.eye(4).expand(13, 1, 4, 4)
 
     def ball(p: torch.Tensor) -> torch.Tensor:

@@ -373,7 +373,7 @@ class LearnedMethod:
                             clock[0] = time.perf_counter()
                         continue
                     art = garment_model.articulation(betas, pose[a:b], trans[a:b])
-                    posed = pose_chunk(garment_model, x, parts, art)
+                    posed = pose_chunk(garment_model, x, parts, art, smoothing.sigma > 0)
                     sdf = self._fields.sdf if self.canonical_push else None
                     vertices, unposed = smoothing.apply(x, posed, art.transforms, core, sdf)
                     lap("posing")

@@ -25,7 +25,7 @@ import numpy as np
 import torch
 from scipy.ndimage import gaussian_filter1d
 
-from usd_garment.body.lbs import inverse_skin
+from usd_garment.body.lbs import solve3
 from usd_garment.canonical.preimage_push import PartBoxes, preimage_push
 from usd_garment.canonical.push_out import push_out_canonical
 from usd_garment.fields.body_fields import FieldTangent
@@ -40,21 +40,24 @@ Part = tuple[slice, FieldTangent | None]
 
 
 def pose_chunk(
-    garment_model: GarmentModel, x: torch.Tensor, parts: Sequence[Part], art: Articulation
-) -> GarmentOutput:
+    garment_model: GarmentModel,
+    x: torch.Tensor,
+    parts: Sequence[Part],
+    art: Articulation,
+    weights: bool = False,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
     """The posed garment ``(t, N, 3)`` of the canonical garments ``x`` ``(t, N, 3)`` (m) of a
-    chunk, with the points before skinning and the skinning weights, each part of its frames
-    with its tangent and :data:`POSE_FRAMES` frames at a time."""
+    chunk, the points before skinning ``(t, N, 3)`` (``GarmentOutput.unposed``) and, if asked
+    for, the skinning weights ``(t, N, J)`` (else None), each part of its frames with its
+    tangent and :data:`POSE_FRAMES` frames at a time."""
     out: list[GarmentOutput] = []
     for frames, tangent in parts:
         for a in range(frames.start, frames.stop, POSE_FRAMES):
             b = slice(a, min(a + POSE_FRAMES, frames.stop))
             out.append(garment_model.pose(x[b], art[b], tangent))
-    return GarmentOutput(
-        torch.cat([o.vertices for o in out]),
-        torch.cat([o.unposed for o in out]),
-        torch.cat([o.weights for o in out]),
-    )
+    vertices = torch.cat([o.vertices for o in out])
+    unposed = torch.cat([o.unposed for o in out])
+    return vertices, unposed, torch.cat([o.weights for o in out]) if weights else None
 
 
 #: The Gaussian of :class:`Smoothing` reaches this many standard deviations (scipy's default).
@@ -83,15 +86,16 @@ class Smoothing:
     def apply(
         self,
         x: torch.Tensor,
-        posed: GarmentOutput,
+        posed: tuple[torch.Tensor, torch.Tensor, torch.Tensor | None],
         transforms: torch.Tensor,
         core: slice,
         sdf: Callable[[torch.Tensor], torch.Tensor] | None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        """The posed garment ``(c, N, 3)`` of the frames ``core`` (c of them) of ``posed`` (a
-        chunk and the frames of the motion around it, ``(t, N, ·)``, posed from the canonical
-        garments ``x`` ``(t, N, 3)`` by ``transforms`` ``(t, J, 4, 4)``), smoothed, and the
-        points before skinning ``(c, N, 3)`` that skin to it.
+        """The posed garment ``(c, N, 3)`` of the frames ``core`` (c of them) of a chunk and
+        the frames of the motion around it, ``posed`` from the canonical garments ``x``
+        ``(t, N, 3)`` by ``transforms`` ``(t, J, 4, 4)`` (:func:`pose_chunk`'s, with the
+        weights where :attr:`sigma` > 0), smoothed, and the points before skinning ``(c, N, 3)``
+        that skin to it.
 
         With the canonical body's ``sdf``, a smoothed vertex cannot end inside its own body
         part: the mean of a vertex's positions over neighbouring frames lies inside the curve
@@ -100,22 +104,26 @@ class Smoothing:
         smoothed vertex's own preimage is found again, to first order (one inverse skinning with
         its weights), pushed ε out of the canonical body where it is less (as the decoded
         garment was: :func:`push_out_canonical`), and the vertex moved with it."""
+        points, before, weights = posed
         if self.sigma <= 0:
-            return posed.vertices[core], posed.unposed[core]
+            return points[core], before[core]
+        assert weights is not None, "pose_chunk(..., weights=True) for a smoothing"
         vertices = torch.from_numpy(
             gaussian_filter1d(
-                posed.vertices.numpy(), self.sigma, axis=0, mode="nearest", truncate=TRUNCATE
+                points.numpy(), self.sigma, axis=0, mode="nearest", truncate=TRUNCATE
             )[core]
         )
-        weights, skin = posed.weights[core], transforms[core]
-        unposed = inverse_skin(vertices, weights, skin)  # (c, N, 3): shaped rest frame
+        blended = torch.einsum("cnj,cjab->cnab", weights[core], transforms[core, :, :3])
+        unposed = solve3(blended[..., :3], vertices - blended[..., 3])  # (c, N, 3): shaped rest
         if sdf is None:
             return vertices, unposed
-        shaped = posed.unposed[core] - x[core]  # the shape offsets B̃s(X)·β
-        canonical = unposed - shaped
+        canonical = unposed - (before[core] - x[core])  # less the shape offsets B̃s(X)·β
         move = push_out_canonical(canonical, sdf) - canonical  # (c, N, 3), zero for most
-        rotation = torch.einsum("cnj,cjab->cnab", weights, skin[..., :3, :3])
-        return vertices + torch.einsum("cnab,cnb->cna", rotation, move), unposed + move
+        frame, vertex = move.any(-1).nonzero(as_tuple=True)
+        step = move[frame, vertex]
+        vertices[frame, vertex] += torch.einsum("mab,mb->ma", blended[frame, vertex, :, :3], step)
+        unposed[frame, vertex] += step
+        return vertices, unposed
 
 
 def available_cores() -> int:
@@ -175,7 +183,7 @@ def _pose_and_push(
     with torch.no_grad():
         art = work.garment_model.articulation(work.betas, _tensor(pose), _tensor(trans))
         canonical = _tensor(x)
-        posed = pose_chunk(work.garment_model, canonical, tangents, art)
+        posed = pose_chunk(work.garment_model, canonical, tangents, art, smoothing.sigma > 0)
         vertices, unposed = smoothing.apply(canonical, posed, art.transforms, core, fields.sdf)
         pushed = preimage_push(
             vertices, unposed, art.transforms[core], fields, work.betas, work.boxes,
