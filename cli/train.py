@@ -284,6 +284,19 @@ def compare(runs: tuple[Path, ...], output: Path) -> None:
     click.echo(f"wrote {output}")
 
 
+def _smoothing_option(name: str, what: str) -> Callable[[F], F]:
+    """A ``train combine`` option: the standard deviation (s) of a Gaussian that smooths
+    ``what``."""
+    return click.option(
+        name,
+        type=click.FloatRange(min=0.0),
+        default=0.0,
+        show_default=True,
+        metavar="SECONDS",
+        help=f"Standard deviation of a Gaussian that smooths {what} (0: none).",
+    )
+
+
 @train.command("combine", short_help="Average several trained models into one (an ensemble).")
 @click.argument("models", nargs=-1, required=True, type=click.Path(file_okay=False, path_type=Path))
 @click.option(
@@ -298,24 +311,8 @@ def compare(runs: tuple[Path, ...], output: Path) -> None:
     default=None,
     help="The combined model's version (default: the first model's, with '-ensemble').",
 )
-@click.option(
-    "--latent-smoothing",
-    type=click.FloatRange(min=0.0),
-    default=0.0,
-    show_default=True,
-    metavar="SECONDS",
-    help="Standard deviation of a Gaussian that smooths the latent codes in time before "
-    "decoding (0: none).",
-)
-@click.option(
-    "--posed-smoothing",
-    type=click.FloatRange(min=0.0),
-    default=0.0,
-    show_default=True,
-    metavar="SECONDS",
-    help="Standard deviation of a Gaussian that smooths the posed garment in time before any "
-    "push-out (0: none).",
-)
+@_smoothing_option("--latent-smoothing", "the latent codes in time before decoding")
+@_smoothing_option("--posed-smoothing", "the posed garment in time before any push-out")
 def combine(
     models: tuple[Path, ...],
     out: Path,

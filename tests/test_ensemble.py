@@ -129,14 +129,42 @@ def test_a_member_of_an_ensemble_is_written_as_a_model_of_its_own(tmp_path, body
     assert code == 2 and "is the model itself" in output, output
 
 
-def test_latent_smoothing_is_a_gaussian_over_the_codes_at_30_fps(tmp_path, body, template):
-    first, second = _members(tmp_path, body, template)
-    out = tmp_path / "smoothed"
-    code, output = _run(["train", "combine", first, second, "--out", out,
-                         "--latent-smoothing", "0.1"])  # fmt: skip
+def _smoothed(
+    tmp_path: Path, body: BodyModel, template: GarmentTemplate, kind: str, seconds: str
+) -> tuple[list[Path], Path, dict[str, object]]:
+    """Two members, and ``train combine --{kind}-smoothing seconds`` of them (checked: the
+    setting and the command in ``model.json``; a negative value refused, nothing written)."""
+    members = _members(tmp_path, body, template)
+    option, out = f"--{kind}-smoothing", tmp_path / "smoothed"
+    code, output = _run(["train", "combine", *members, "--out", out, option, seconds])
     assert code == 0, output
     info = json.loads((out / "model.json").read_text())
-    assert info["latent_smoothing_s"] == 0.1 and "--latent-smoothing 0.1" in info["command"]
+    assert info[f"{kind}_smoothing_s"] == float(seconds)
+    assert f"{option} {seconds}" in info["command"]
+    code, output = _run(["train", "combine", *members, "--out", tmp_path / "x", option, "-1"])
+    assert code == 2 and "-1" in output and not (tmp_path / "x").exists(), output
+    return members, out, info
+
+
+def _kept_and_checked(
+    tmp_path: Path, out: Path, info: dict[str, object], kind: str, bad: float
+) -> None:
+    """The smoothing ``kind`` of the model ``out`` (``model.json``: ``info``): kept by ``train
+    member`` (a member is benched as it runs), refused when ``bad``, 0 where ``model.json``
+    has none (models written before the setting)."""
+    key = f"{kind}_smoothing_s"
+    assert _run(["train", "member", out, "--index", "1", "--out", tmp_path / "m1"])[0] == 0
+    stored = getattr(load_learned_model(out), f"{kind}_smoothing")
+    assert getattr(load_learned_model(tmp_path / "m1"), f"{kind}_smoothing") == stored > 0
+    (out / "model.json").write_text(json.dumps({**info, key: bad}))
+    with pytest.raises(ModelError, match=f"{key} must be a finite number"):
+        load_learned_model(out)
+    (out / "model.json").write_text(json.dumps({k: v for k, v in info.items() if k != key}))
+    assert getattr(load_learned_model(out), f"{kind}_smoothing") == 0.0
+
+
+def test_latent_smoothing_is_a_gaussian_over_the_codes_at_30_fps(tmp_path, body, template):
+    _, out, info = _smoothed(tmp_path, body, template, "latent", "0.1")
     smoothed = load_learned_model(out, body)
     plain = replace(smoothed, latent_smoothing=0.0)
     assert smoothed.latent_smoothing == 0.1
@@ -146,19 +174,7 @@ def test_latent_smoothing_is_a_gaussian_over_the_codes_at_30_fps(tmp_path, body,
     expected = gaussian_filter1d(raw.numpy(), 3.0, axis=0, mode="mirror")
     np.testing.assert_allclose(z.numpy(), expected, atol=1e-6)
     assert (z.diff(n=2, dim=0).abs().mean() < 0.5 * raw.diff(n=2, dim=0).abs().mean()).item()
-    assert _run(["train", "member", out, "--index", "1", "--out", tmp_path / "m1"])[0] == 0
-    assert load_learned_model(tmp_path / "m1").latent_smoothing == 0.1  # benched as it runs
-
-    code, output = _run(["train", "combine", first, second, "--out", tmp_path / "x",
-                         "--latent-smoothing", "-1"])  # fmt: skip
-    assert code == 2 and "-1" in output and not (tmp_path / "x").exists(), output
-    info["latent_smoothing_s"] = -0.5
-    (out / "model.json").write_text(json.dumps(info))
-    with pytest.raises(ModelError, match="latent_smoothing_s must be a finite number"):
-        load_learned_model(out)
-    del info["latent_smoothing_s"]  # models written before the setting: no smoothing
-    (out / "model.json").write_text(json.dumps(info))
-    assert load_learned_model(out).latent_smoothing == 0.0
+    _kept_and_checked(tmp_path, out, info, "latent", -0.5)
 
 
 def test_posed_smoothing_is_a_gaussian_over_the_posed_frames(tmp_path, body, template):
@@ -168,13 +184,7 @@ def test_posed_smoothing_is_a_gaussian_over_the_posed_frames(tmp_path, body, tem
     that the Gaussian reaches); ``train member`` keeps it; a negative one is refused."""
     from usd_garment.methods.learned import LearnedMethod
 
-    first, second = _members(tmp_path, body, template)
-    out = tmp_path / "smoothed"
-    code, output = _run(["train", "combine", first, second, "--out", out,
-                         "--posed-smoothing", "0.05"])  # fmt: skip
-    assert code == 0, output
-    info = json.loads((out / "model.json").read_text())
-    assert info["posed_smoothing_s"] == 0.05 and "--posed-smoothing 0.05" in info["command"]
+    (first, second), out, info = _smoothed(tmp_path, body, template, "posed", "0.05")
     assert info["latent_smoothing_s"] == 0.0
     plain_dir = tmp_path / "plain"
     assert _run(["train", "combine", first, second, "--out", plain_dir])[0] == 0
@@ -188,19 +198,7 @@ def test_posed_smoothing_is_a_gaussian_over_the_posed_frames(tmp_path, body, tem
     expected = gaussian_filter1d(raw, 1.5, axis=0, mode="nearest")
     np.testing.assert_allclose(np.concatenate(chunks), expected, atol=2e-5)
     assert np.abs(np.diff(expected, n=2, axis=0)).mean() < np.abs(np.diff(raw, n=2, axis=0)).mean()
-    assert _run(["train", "member", out, "--index", "1", "--out", tmp_path / "m1"])[0] == 0
-    assert load_learned_model(tmp_path / "m1").posed_smoothing == 0.05
-
-    code, output = _run(["train", "combine", first, second, "--out", tmp_path / "x",
-                         "--posed-smoothing", "-1"])  # fmt: skip
-    assert code == 2 and "-1" in output and not (tmp_path / "x").exists(), output
-    info["posed_smoothing_s"] = float("nan")
-    (out / "model.json").write_text(json.dumps(info))
-    with pytest.raises(ModelError, match="posed_smoothing_s must be a finite number"):
-        load_learned_model(out)
-    del info["posed_smoothing_s"]  # models written before the setting: no smoothing
-    (out / "model.json").write_text(json.dumps(info))
-    assert load_learned_model(out).posed_smoothing == 0.0
+    _kept_and_checked(tmp_path, out, info, "posed", float("nan"))
 
 
 def test_saved_model_files_get_the_usual_permissions(tmp_path, body, template):
