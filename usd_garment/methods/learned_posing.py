@@ -25,7 +25,7 @@ import numpy as np
 import torch
 from scipy.ndimage import gaussian_filter1d
 
-from usd_garment.body.lbs import solve3
+from usd_garment.body.lbs import inverse_skin
 from usd_garment.canonical.preimage_push import PartBoxes, preimage_push
 from usd_garment.canonical.push_out import push_out_canonical
 from usd_garment.fields.body_fields import FieldTangent
@@ -113,15 +113,16 @@ class Smoothing:
                 points.numpy(), self.sigma, axis=0, mode="nearest", truncate=TRUNCATE
             )[core]
         )
-        blended = torch.einsum("cnj,cjab->cnab", weights[core], transforms[core, :, :3])
-        unposed = solve3(blended[..., :3], vertices - blended[..., 3])  # (c, N, 3): shaped rest
+        weights, skin = weights[core], transforms[core]
+        unposed = inverse_skin(vertices, weights, skin)  # (c, N, 3): shaped rest frame
         if sdf is None:
             return vertices, unposed
         canonical = unposed - (before[core] - x[core])  # less the shape offsets B̃s(X)·β
         move = push_out_canonical(canonical, sdf) - canonical  # (c, N, 3), zero for most
-        frame, vertex = move.any(-1).nonzero(as_tuple=True)
+        frame, vertex = move.any(-1).nonzero(as_tuple=True)  # the few moved: their rotations
+        rotation = torch.einsum("mj,mjab->mab", weights[frame, vertex], skin[frame, :, :3, :3])
         step = move[frame, vertex]
-        vertices[frame, vertex] += torch.einsum("mab,mb->ma", blended[frame, vertex, :, :3], step)
+        vertices[frame, vertex] += torch.einsum("mab,mb->ma", rotation, step)
         unposed[frame, vertex] += step
         return vertices, unposed
 
