@@ -423,7 +423,7 @@ def test_network_floor_splits_the_error_into_best_fit_and_prediction(body, templ
 
 
 def test_canonical_push_out_moves_only_the_vertices_near_the_body(template):
-    from usd_garment.canonical.push_out import push_out_canonical
+    from usd_garment.canonical.push_out import LIPSCHITZ, push_out_canonical
 
     fields = load_body_fields()
     x = torch.as_tensor(template.vertices, dtype=torch.float32)
@@ -439,10 +439,27 @@ def test_canonical_push_out_moves_only_the_vertices_near_the_body(template):
     moved[sunk] -= (d[sunk] + 5e-3).unsqueeze(-1) * normal[sunk]
     batch = torch.stack([x, moved])
     assert (fields.sdf(batch[1, sunk]) < 0).float().mean() > 0.9
-    out = push_out_canonical(batch, fields.sdf)
+    out, floor = push_out_canonical(batch, fields.sdf)
     assert out.shape == batch.shape
     assert fields.sdf(out).min() > 2e-3 - 5e-4
     untouched = fields.sdf(batch) >= 2e-3
     assert torch.equal(out[untouched], batch[untouched])
     back = (out[1, sunk] - x[sunk]).norm(dim=-1)  # out along the line it was sunk on, to ε
     assert float((back - (d[sunk] - 2e-3)).abs().mean()) < 1.5e-3
+    # The floor bounds the pushed garment's SDF from below (the moved ones to Newton's
+    # accuracy), and seeds a later push of points near it: sunk again by 1 mm, the same
+    # vertices are looked up and moved as from the mean's bound, with fewer lookups.
+    assert floor.shape == batch.shape[:2]
+    assert bool((floor <= fields.sdf(out) + 5e-4).all())
+    again = out - 1e-3 * torch.nn.functional.normalize(out - out.mean(dim=1, keepdim=True), dim=-1)
+    looked: list[int] = []
+
+    def sdf(points: torch.Tensor) -> torch.Tensor:
+        looked.append(points.numel() // 3)
+        return fields.sdf(points)
+
+    seeded, _ = push_out_canonical(again, sdf, floor=floor - LIPSCHITZ * 1e-3)
+    by_floor = sum(looked)
+    looked.clear()
+    assert torch.equal(seeded, push_out_canonical(again, sdf)[0])
+    assert by_floor < sum(looked) - x.shape[0]  # not even the mean's lookups

@@ -29,32 +29,45 @@ def push_out_canonical(
     sdf: Callable[[torch.Tensor], torch.Tensor],
     epsilon: float = COLLISION_EPSILON,
     passes: int = PASSES,
-) -> torch.Tensor:
+    floor: torch.Tensor | None = None,
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Canonical garments ``x`` ``(B, N, 3)`` (m) with every vertex whose SDF is below
     ``epsilon`` (m) moved along the SDF gradient to SDF ≈ ``epsilon``; the other vertices are
     returned unchanged. ``sdf``: points ``(..., 3)`` → signed distances ``(...)`` (m, negative
     inside), differentiable (``BodyFields.sdf``).
 
-    The SDF is looked up once at the garments' mean ``(N, 3)``; a vertex is only looked up again
-    where that value, less its distance from the mean (with a margin: the grid's SDF is nearly
-    1-Lipschitz), could be below ``epsilon``: most of a chunk of frames is skipped."""
+    A vertex is only looked up where a lower bound on its SDF could be below ``epsilon`` (with
+    a margin): ``floor`` ``(B, N)`` (m) where the caller knows one, else the SDF at the
+    garments' mean ``(N, 3)`` less the vertex's distance from it (the grid's SDF is nearly
+    1-Lipschitz): most of a chunk of frames is skipped.
+
+    Returns:
+        The pushed garments ``(B, N, 3)`` and a lower bound ``(B, N)`` (m) on each one's SDF,
+        for a later push of points near them: the value looked up, ``epsilon`` for a moved
+        vertex (to the Newton steps' accuracy), else the bound it was skipped by.
+    """
     out = x.detach().clone()
     with torch.no_grad():
-        mean = out.mean(dim=0)
-        bound = sdf(mean)[None] - LIPSCHITZ * (out - mean).norm(dim=-1)  # (B, N), m
-        candidates = (bound < epsilon + MARGIN).view(-1).nonzero().squeeze(1)
-    flat = out.view(-1, 3)
+        if floor is None:
+            mean = out.mean(dim=0)
+            floor = sdf(mean)[None] - LIPSCHITZ * (out - mean).norm(dim=-1)  # (B, N), m
+        floor = floor.clone()
+        candidates = (floor < epsilon + MARGIN).view(-1).nonzero().squeeze(1)
+    flat, known = out.view(-1, 3), floor.view(-1)
     for _ in range(passes):
         if candidates.numel() == 0:
             break
         with torch.no_grad():  # the candidates' values first: few of them need a gradient
-            near = sdf(flat[candidates]) < epsilon
+            values = sdf(flat[candidates])
+            known[candidates] = values
+            near = values < epsilon
         if not bool(near.any()):
             break
         candidates = candidates[near]
         d, normal = sdf_and_normal(sdf, flat[candidates])
         flat[candidates] += (epsilon - d).unsqueeze(-1) * normal
-    return out
+        known[candidates] = epsilon
+    return out, floor
 
 
 def sdf_and_normal(

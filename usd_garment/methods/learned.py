@@ -356,8 +356,9 @@ class LearnedMethod:
                     if early:
                         x = torch.from_numpy(carry_to_lod(x.numpy(), *lods))
                         lap("carry")
+                    floor = None  # a lower bound on x's SDF (t, N), for the smoothing's guard
                     if self.canonical_push:
-                        x = push_out_canonical(x, self._fields.sdf)
+                        x, floor = push_out_canonical(x, self._fields.sdf)
                         lap("canonical")
                     if self.exact_fields:
                         tangents = [Tangent(slice(0, b - a), None, 0.0)]
@@ -366,7 +367,7 @@ class LearnedMethod:
                     parts = [(part.frames, part.tangent) for part in tangents]
                     lap("fields")
                     if posing is not None:  # posed and pushed there, in the order given
-                        work = (x, parts, pose[a:b], trans[a:b], core, smoothing)
+                        work = (x, floor, parts, pose[a:b], trans[a:b], core, smoothing)
                         pending.append(posing.submit(*work))
                         while len(pending) > posing.workers:  # one chunk waits for a worker
                             yield collect()
@@ -375,7 +376,7 @@ class LearnedMethod:
                     art = garment_model.articulation(betas, pose[a:b], trans[a:b])
                     posed = pose_chunk(garment_model, x, parts, art, smoothing.sigma > 0)
                     sdf = self._fields.sdf if self.canonical_push else None
-                    vertices, unposed = smoothing.apply(x, posed, art.transforms, core, sdf)
+                    vertices, unposed = smoothing.apply(x, posed, art.transforms, core, sdf, floor)
                     lap("posing")
                     if boxes is not None:  # the whole chunk at once: fewer, larger steps
                         vertices = preimage_push(
