@@ -791,21 +791,24 @@ def test_posed_smoothing_keeps_a_vertex_out_of_its_own_part() -> None:
     angle = torch.arange(13, dtype=torch.float32) * (20 * np.pi / 180)
     circle = torch.stack([torch.cos(angle), torch.sin(angle), torch.zeros(13)], -1)
     x = (0.1025 * circle)[:, None]  # (13, 1, 3): one vertex, skinned by one joint, unmoved
-    posed = (x, x, torch.ones(13, 1, 1))
-    skin = torch.eye(4).expand(13, 1, 4, 4)
+    posed = (x, x, torch.eye(4)[:3].expand(13, 1, 3, 4))  # blended by the identity
 
     def ball(p: torch.Tensor) -> torch.Tensor:
         return p.norm(dim=-1) - 0.1
 
     core = slice(4, 9)
-    cut, _ = smoothing.apply(x, posed, skin, core, None)
+    cut, _ = smoothing.apply(x, posed, core, None)
     assert bool((cut.norm(dim=-1) < 0.1).all())  # inside the ball on every frame
     whole = torch.from_numpy(gaussian_filter1d(x.numpy(), 1.0, axis=0, mode="nearest"))
     torch.testing.assert_close(cut, whole[core])
-    kept, unposed = smoothing.apply(x, posed, skin, core, ball)
+    kept, unposed = smoothing.apply(x, posed, core, ball)
+    # A floor under the decoded garment's SDF (its 2.5 mm) changes nothing; one that (wrongly)
+    # says 1 m spares the lookups, and the vertex stays cut.
+    assert torch.equal(smoothing.apply(x, posed, core, ball, torch.full((13, 1), 2.5e-3))[0], kept)
+    assert torch.equal(smoothing.apply(x, posed, core, ball, torch.ones(13, 1))[0], cut)
     torch.testing.assert_close(kept.norm(dim=-1), torch.full((5, 1), 0.1 + COLLISION_EPSILON))
     torch.testing.assert_close(unposed, kept)  # the identity skins it to itself
     direction = cut / cut.norm(dim=-1, keepdim=True)
     torch.testing.assert_close(kept / kept.norm(dim=-1, keepdim=True), direction)  # straight out
-    plain, same = Smoothing().apply(x, posed, skin, core, ball)
+    plain, same = Smoothing().apply(x, posed, core, ball)
     assert torch.equal(plain, x[core]) and torch.equal(same, x[core])

@@ -74,6 +74,15 @@ def batch_rigid_transform(
     return posed_joints, skinning
 
 
+def blend_transforms(weights: torch.Tensor, transforms: torch.Tensor) -> torch.Tensor:
+    """Each point's blended skinning transform ``(B, N, 3, 4)`` [A | t] from its weights
+    ``(N, J)`` or ``(B, N, J)`` (rows summing to 1) and the skinning transforms
+    ``(B, J, 4, 4)`` from :func:`batch_rigid_transform`: a rest point p goes to A·p + t."""
+    if weights.dim() == 2:
+        return torch.einsum("nj,bjcd->bncd", weights, transforms[..., :3, :])
+    return torch.einsum("bnj,bjcd->bncd", weights, transforms[..., :3, :])
+
+
 def skin(points: torch.Tensor, weights: torch.Tensor, transforms: torch.Tensor) -> torch.Tensor:
     """Linear blend skinning.
 
@@ -85,10 +94,12 @@ def skin(points: torch.Tensor, weights: torch.Tensor, transforms: torch.Tensor) 
     Returns:
         ``(B, N, 3)`` posed points (m).
     """
-    if weights.dim() == 2:
-        blended = torch.einsum("nj,bjcd->bncd", weights, transforms[..., :3, :])
-    else:
-        blended = torch.einsum("bnj,bjcd->bncd", weights, transforms[..., :3, :])
+    return skin_blended(points, blend_transforms(weights, transforms))
+
+
+def skin_blended(points: torch.Tensor, blended: torch.Tensor) -> torch.Tensor:
+    """Posed points ``(B, N, 3)`` (m) of rest points ``(B, N, 3)`` (m) by their blended
+    transforms ``(B, N, 3, 4)`` (:func:`blend_transforms`)."""
     return torch.einsum("bncd,bnd->bnc", blended[..., :3], points) + blended[..., 3]
 
 
@@ -104,7 +115,12 @@ def inverse_skin(
     """
     if weights.dim() == 2:
         weights = weights.expand(points.shape[0], -1, -1)
-    blended = torch.einsum("bnj,bjcd->bncd", weights, transforms[..., :3, :])  # (B, N, 3, 4)
+    return unskin_blended(points, blend_transforms(weights, transforms))
+
+
+def unskin_blended(points: torch.Tensor, blended: torch.Tensor) -> torch.Tensor:
+    """Rest points ``(B, N, 3)`` (m) that :func:`skin_blended` with ``blended``
+    ``(B, N, 3, 4)`` maps to ``points`` ``(B, N, 3)`` (m)."""
     return solve3(blended[..., :3], points - blended[..., 3])
 
 

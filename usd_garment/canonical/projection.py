@@ -46,7 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from usd_garment.body.lbs import inverse_skin
+from usd_garment.body.lbs import unskin_blended
 from usd_garment.canonical.strain import TriangleStrain
 from usd_garment.garment.model import Articulation, GarmentModel
 
@@ -184,19 +184,17 @@ def _inverse_skinning(
     fields frozen at the current X; a vertex keeps its old X when the step raises its error."""
     with torch.no_grad():
         out = model.pose(x, art)
+        unposed, blended = out.unposed, out.blended
         err = (out.vertices - target).square().sum(-1)
         for _ in range(settings.inverse_steps):
-            step = inverse_skin(target, out.weights, art.transforms) - (out.unposed - x)
+            step = unskin_blended(target, blended) - (unposed - x)
             new = model.pose(step, art)
             new_err = (new.vertices - target).square().sum(-1)
             better = (new_err < err)[..., None]
             x = torch.where(better, step, x)
             err = torch.minimum(new_err, err)
-            out = type(out)(
-                torch.where(better, new.vertices, out.vertices),
-                torch.where(better, new.unposed, out.unposed),
-                torch.where(better, new.weights, out.weights),
-            )
+            unposed = torch.where(better, new.unposed, unposed)
+            blended = torch.where(better[..., None], new.blended, blended)
     return x
 
 

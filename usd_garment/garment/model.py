@@ -3,9 +3,9 @@ deformed by the diffused shape (and pose) blendshapes, then skinned with the dif
 W̃(X) and the body's joints J(β).
 
 Reuses the body's own pieces: joints from ``BodyModel.shaped``, forward kinematics from
-``batch_rigid_transform``, skinning from ``skin``. Shapes: B frames, N garment points, J = 24
-joints, K = 10 betas. Units: metres and radians. Differentiable in X, β and θ; runs on any
-device the body and the fields live on.
+``batch_rigid_transform``, skinning from ``blend_transforms`` and ``skin_blended``. Shapes: B
+frames, N garment points, J = 24 joints, K = 10 betas. Units: metres and radians.
+Differentiable in X, β and θ; runs on any device the body and the fields live on.
 """
 
 from __future__ import annotations
@@ -15,7 +15,13 @@ from dataclasses import dataclass
 import torch
 
 from usd_garment.body.joints import NUM_JOINTS
-from usd_garment.body.lbs import batch_rigid_transform, batch_rodrigues, pose_features, skin
+from usd_garment.body.lbs import (
+    batch_rigid_transform,
+    batch_rodrigues,
+    blend_transforms,
+    pose_features,
+    skin_blended,
+)
 from usd_garment.body.model import BodyModel
 from usd_garment.fields.body_fields import BodyFields, FieldTangent
 
@@ -48,11 +54,14 @@ class GarmentOutput:
         vertices: ``(B, N, 3)`` posed garment M_G(X, β, θ) (m).
         unposed: ``(B, N, 3)`` T_G(X, β, θ) = X + B̃s(X, β) + B̃p(X, θ), before skinning (m).
         weights: ``(B, N, J)`` diffused skinning weights W̃(X).
+        blended: ``(B, N, 3, 4)`` each point's blended skinning transform, which maps
+            ``unposed`` to ``vertices`` (``lbs.blend_transforms``).
     """
 
     vertices: torch.Tensor
     unposed: torch.Tensor
     weights: torch.Tensor
+    blended: torch.Tensor
 
 
 class GarmentModel(torch.nn.Module):
@@ -107,13 +116,12 @@ class GarmentModel(torch.nn.Module):
             and bool((art.betas == art.betas[:1]).all())  # one shape (a sync)
         ):
             weights, offsets = source.shaped(x, art.betas[0])  # W̃(X), B̃s(X)·β
-            t_g = x + offsets
-            return GarmentOutput(skin(t_g, weights, art.transforms), t_g, weights)
+            return _skinned(x + offsets, weights, art)
         weights, shape_dirs, pose_dirs = source.all_fields(x)  # W̃(X), B̃s(X), B̃p(X)
         t_g = x + torch.einsum("bk,bnck->bnc", art.betas, shape_dirs)  # Eq. 9
         if pose_dirs is not None:
             t_g = t_g + torch.einsum("bp,bncp->bnc", art.pose_features, pose_dirs)
-        return GarmentOutput(skin(t_g, weights, art.transforms), t_g, weights)  # Eq. 8
+        return _skinned(t_g, weights, art)  # Eq. 8
 
     def forward(
         self,
@@ -131,3 +139,10 @@ class GarmentModel(torch.nn.Module):
             trans: ``(B, 3)`` root translation (m), or None for zero.
         """
         return self.pose(x, self.articulation(betas, pose, trans))
+
+
+def _skinned(t_g: torch.Tensor, weights: torch.Tensor, art: Articulation) -> GarmentOutput:
+    """Points before skinning ``t_g`` ``(B, N, 3)`` (m) skinned with ``weights`` ``(B, N, J)``
+    (Eq. 8)."""
+    blended = blend_transforms(weights, art.transforms)
+    return GarmentOutput(skin_blended(t_g, blended), t_g, weights, blended)

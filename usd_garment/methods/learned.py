@@ -376,7 +376,7 @@ class LearnedMethod:
                     art = garment_model.articulation(betas, pose[a:b], trans[a:b])
                     posed = pose_chunk(garment_model, x, parts, art, smoothing.sigma > 0)
                     sdf = self._fields.sdf if self.canonical_push else None
-                    vertices, unposed = smoothing.apply(x, posed, art.transforms, core, sdf, floor)
+                    vertices, unposed = smoothing.apply(x, posed, core, sdf, floor)
                     lap("posing")
                     if boxes is not None:  # the whole chunk at once: fewer, larger steps
                         vertices = preimage_push(

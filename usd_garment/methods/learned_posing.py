@@ -25,7 +25,7 @@ import numpy as np
 import torch
 from scipy.ndimage import gaussian_filter1d
 
-from usd_garment.body.lbs import inverse_skin
+from usd_garment.body.lbs import unskin_blended
 from usd_garment.canonical.preimage_push import PartBoxes, preimage_push
 from usd_garment.canonical.push_out import LIPSCHITZ, push_out_canonical
 from usd_garment.fields.body_fields import FieldTangent
@@ -44,12 +44,13 @@ def pose_chunk(
     x: torch.Tensor,
     parts: Sequence[Part],
     art: Articulation,
-    weights: bool = False,
+    blended: bool = False,
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
     """The posed garment ``(t, N, 3)`` of the canonical garments ``x`` ``(t, N, 3)`` (m) of a
     chunk, the points before skinning ``(t, N, 3)`` (``GarmentOutput.unposed``) and, if asked
-    for, the skinning weights ``(t, N, J)`` (else None), each part of its frames with its
-    tangent and :data:`POSE_FRAMES` frames at a time."""
+    for, their blended skinning transforms ``(t, N, 3, 4)`` (``GarmentOutput.blended``; else
+    None), each part of its frames with its tangent and :data:`POSE_FRAMES` frames at a
+    time."""
     out: list[GarmentOutput] = []
     for frames, tangent in parts:
         for a in range(frames.start, frames.stop, POSE_FRAMES):
@@ -57,7 +58,7 @@ def pose_chunk(
             out.append(garment_model.pose(x[b], art[b], tangent))
     vertices = torch.cat([o.vertices for o in out])
     unposed = torch.cat([o.unposed for o in out])
-    return vertices, unposed, torch.cat([o.weights for o in out]) if weights else None
+    return vertices, unposed, torch.cat([o.blended for o in out]) if blended else None
 
 
 #: The Gaussian of :class:`Smoothing` reaches this many standard deviations (scipy's default).
@@ -87,48 +88,45 @@ class Smoothing:
         self,
         x: torch.Tensor,
         posed: tuple[torch.Tensor, torch.Tensor, torch.Tensor | None],
-        transforms: torch.Tensor,
         core: slice,
         sdf: Callable[[torch.Tensor], torch.Tensor] | None,
         floor: torch.Tensor | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """The posed garment ``(c, N, 3)`` of the frames ``core`` (c of them) of a chunk and
         the frames of the motion around it, ``posed`` from the canonical garments ``x``
-        ``(t, N, 3)`` by ``transforms`` ``(t, J, 4, 4)`` (:func:`pose_chunk`'s, with the
-        weights where :attr:`sigma` > 0), smoothed, and the points before skinning ``(c, N, 3)``
-        that skin to it.
+        ``(t, N, 3)`` (:func:`pose_chunk`'s, with the blended transforms where :attr:`sigma`
+        > 0), smoothed, and the points before skinning ``(c, N, 3)`` that skin to it.
 
         With the canonical body's ``sdf``, a smoothed vertex cannot end inside its own body
         part: the mean of a vertex's positions over neighbouring frames lies inside the curve
         it follows, and a fast limb's sleeve is carried into the limb, where the preimage push
         (which leaves each vertex's own preimage out of its search) would not find it. So each
-        smoothed vertex's own preimage is found again, to first order (one inverse skinning with
-        its weights), pushed ε out of the canonical body where it is less (as the decoded
-        garment was: :func:`push_out_canonical`), and the vertex moved with it. With
+        smoothed vertex's own preimage is found again, to first order (one inverse skinning by
+        its blended transform), pushed ε out of the canonical body where it is less (as the
+        decoded garment was: :func:`push_out_canonical`), and the vertex moved with it. With
         ``floor`` ``(t, N)``, a lower bound on the SDF of ``x`` (m; :func:`push_out_canonical`
         returns one), only the own preimages that this bound, less how far they are from
         ``x``, leaves near the body are looked up (about a third on a walk)."""
-        points, before, weights = posed
+        points, before, blended = posed
         if self.sigma <= 0:
             return points[core], before[core]
-        assert weights is not None, "pose_chunk(..., weights=True) for a smoothing"
+        assert blended is not None, "pose_chunk(..., blended=True) for a smoothing"
         vertices = torch.from_numpy(
             gaussian_filter1d(
                 points.numpy(), self.sigma, axis=0, mode="nearest", truncate=TRUNCATE
             )[core]
         )
-        weights, skin = weights[core], transforms[core]
-        unposed = inverse_skin(vertices, weights, skin)  # (c, N, 3): shaped rest frame
+        blended = blended[core]
+        unposed = unskin_blended(vertices, blended)  # (c, N, 3): shaped rest frame
         if sdf is None:
             return vertices, unposed
         canonical = unposed - (before[core] - x[core])  # less the shape offsets B̃s(X)·β
         if floor is not None:
             floor = floor[core] - LIPSCHITZ * (canonical - x[core]).norm(dim=-1)
         move = push_out_canonical(canonical, sdf, floor=floor)[0] - canonical  # zero for most
-        frame, vertex = move.any(-1).nonzero(as_tuple=True)  # the few moved: their rotations
-        rotation = torch.einsum("mj,mjab->mab", weights[frame, vertex], skin[frame, :, :3, :3])
+        frame, vertex = move.any(-1).nonzero(as_tuple=True)  # the few moved
         step = move[frame, vertex]
-        vertices[frame, vertex] += torch.einsum("mab,mb->ma", rotation, step)
+        vertices[frame, vertex] += torch.einsum("mab,mb->ma", blended[frame, vertex, :, :3], step)
         unposed[frame, vertex] += step
         return vertices, unposed
 
@@ -193,7 +191,7 @@ def _pose_and_push(
         canonical = _tensor(x)
         posed = pose_chunk(work.garment_model, canonical, tangents, art, smoothing.sigma > 0)
         vertices, unposed = smoothing.apply(
-            canonical, posed, art.transforms, core, fields.sdf,
+            canonical, posed, core, fields.sdf,
             None if floor is None else _tensor(floor),
         )  # fmt: skip
         pushed = preimage_push(
