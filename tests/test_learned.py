@@ -791,7 +791,8 @@ def test_posed_smoothing_keeps_a_vertex_out_of_its_own_part() -> None:
     angle = torch.arange(13, dtype=torch.float32) * (20 * np.pi / 180)
     circle = torch.stack([torch.cos(angle), torch.sin(angle), torch.zeros(13)], -1)
     x = (0.1025 * circle)[:, None]  # (13, 1, 3): one vertex, skinned by one joint, unmoved
-    posed = (x, x, torch.eye(4)[:3].expand(13, 1, 3, 4))  # blended by the identity
+    eye = torch.eye(4)[:3].expand(13, 1, 3, 4)
+    posed = (x, x, [eye])  # one piece of 13 frames, blended by the identity
 
     def ball(p: torch.Tensor) -> torch.Tensor:
         return p.norm(dim=-1) - 0.1
@@ -806,6 +807,8 @@ def test_posed_smoothing_keeps_a_vertex_out_of_its_own_part() -> None:
     # says 1 m spares the lookups, and the vertex stays cut.
     assert torch.equal(smoothing.apply(x, posed, core, ball, torch.full((13, 1), 2.5e-3))[0], kept)
     assert torch.equal(smoothing.apply(x, posed, core, ball, torch.ones(13, 1))[0], cut)
+    # Posed in two pieces that the core's frames straddle: the same.
+    assert torch.equal(smoothing.apply(x, (x, x, [eye[:6], eye[6:]]), core, ball)[0], kept)
     torch.testing.assert_close(kept.norm(dim=-1), torch.full((5, 1), 0.1 + COLLISION_EPSILON))
     torch.testing.assert_close(unposed, kept)  # the identity skins it to itself
     direction = cut / cut.norm(dim=-1, keepdim=True)

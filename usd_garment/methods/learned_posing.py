@@ -39,18 +39,25 @@ POSE_FRAMES = 64
 Part = tuple[slice, FieldTangent | None]
 
 
+#: A chunk posed by :func:`pose_chunk`: the posed garment ``(t, N, 3)`` (m), the points before
+#: skinning ``(t, N, 3)`` (m) and, where asked for, the blended skinning transforms of its
+#: pieces of :data:`POSE_FRAMES` frames or fewer, in order (each ``(p, N, 3, 4)``).
+Posed = tuple[torch.Tensor, torch.Tensor, list[torch.Tensor] | None]
+
+
 def pose_chunk(
     garment_model: GarmentModel,
     x: torch.Tensor,
     parts: Sequence[Part],
     art: Articulation,
     blended: bool = False,
-) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
-    """The posed garment ``(t, N, 3)`` of the canonical garments ``x`` ``(t, N, 3)`` (m) of a
-    chunk, the points before skinning ``(t, N, 3)`` (``GarmentOutput.unposed``) and, if asked
-    for, their blended skinning transforms ``(t, N, 3, 4)`` (``GarmentOutput.blended``; else
-    None), each part of its frames with its tangent and :data:`POSE_FRAMES` frames at a
-    time."""
+) -> Posed:
+    """The canonical garments ``x`` ``(t, N, 3)`` (m) of a chunk posed, each part of its frames
+    with its tangent and :data:`POSE_FRAMES` frames at a time: the garment, the points before
+    skinning (``GarmentOutput.unposed``) and, if asked for, the pieces' blended transforms
+    (``GarmentOutput.blended``; else None). Those are left in pieces: a chunk's together would
+    take a fresh allocation of about 55 MB, and its page faults cost more than the rest of
+    the posed smoothing's inverse skinning."""
     out: list[GarmentOutput] = []
     for frames, tangent in parts:
         for a in range(frames.start, frames.stop, POSE_FRAMES):
@@ -58,7 +65,7 @@ def pose_chunk(
             out.append(garment_model.pose(x[b], art[b], tangent))
     vertices = torch.cat([o.vertices for o in out])
     unposed = torch.cat([o.unposed for o in out])
-    return vertices, unposed, torch.cat([o.blended for o in out]) if blended else None
+    return vertices, unposed, [o.blended for o in out] if blended else None
 
 
 #: The Gaussian of :class:`Smoothing` reaches this many standard deviations (scipy's default).
@@ -87,7 +94,7 @@ class Smoothing:
     def apply(
         self,
         x: torch.Tensor,
-        posed: tuple[torch.Tensor, torch.Tensor, torch.Tensor | None],
+        posed: Posed,
         core: slice,
         sdf: Callable[[torch.Tensor], torch.Tensor] | None,
         floor: torch.Tensor | None = None,
@@ -107,28 +114,54 @@ class Smoothing:
         ``floor`` ``(t, N)``, a lower bound on the SDF of ``x`` (m; :func:`push_out_canonical`
         returns one), only the own preimages that this bound, less how far they are from
         ``x``, leaves near the body are looked up (about a third on a walk)."""
-        points, before, blended = posed
+        points, before, pieces = posed
         if self.sigma <= 0:
             return points[core], before[core]
-        assert blended is not None, "pose_chunk(..., blended=True) for a smoothing"
-        vertices = torch.from_numpy(
-            gaussian_filter1d(
-                points.numpy(), self.sigma, axis=0, mode="nearest", truncate=TRUNCATE
-            )[core]
+        assert pieces is not None, "pose_chunk(..., blended=True) for a smoothing"
+        smoothed = torch.from_numpy(
+            gaussian_filter1d(points.numpy(), self.sigma, axis=0, mode="nearest", truncate=TRUNCATE)
         )
-        blended = blended[core]
-        unposed = unskin_blended(vertices, blended)  # (c, N, 3): shaped rest frame
-        if sdf is None:
-            return vertices, unposed
-        canonical = unposed - (before[core] - x[core])  # less the shape offsets B̃s(X)·β
-        if floor is not None:
-            floor = floor[core] - LIPSCHITZ * (canonical - x[core]).norm(dim=-1)
-        move = push_out_canonical(canonical, sdf, floor=floor)[0] - canonical  # zero for most
-        frame, vertex = move.any(-1).nonzero(as_tuple=True)  # the few moved
-        step = move[frame, vertex]
-        vertices[frame, vertex] += torch.einsum("mab,mb->ma", blended[frame, vertex, :, :3], step)
-        unposed[frame, vertex] += step
+        out: list[tuple[torch.Tensor, torch.Tensor]] = []
+        start = 0
+        for blended in pieces:  # the core's frames piece by piece
+            stop = start + len(blended)
+            a, b = max(start, core.start), min(stop, core.stop)
+            if a < b:
+                frames = slice(a, b)
+                out.append(_own_preimages(
+                    smoothed[frames], blended[a - start : b - start], before[frames] - x[frames],
+                    x[frames], sdf, None if floor is None else floor[frames],
+                ))  # fmt: skip
+            start = stop
+        return torch.cat([v for v, _ in out]), torch.cat([u for _, u in out])
+
+
+def _own_preimages(
+    vertices: torch.Tensor,
+    blended: torch.Tensor,
+    offsets: torch.Tensor,
+    x: torch.Tensor,
+    sdf: Callable[[torch.Tensor], torch.Tensor] | None,
+    floor: torch.Tensor | None,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Smoothed vertices ``(p, N, 3)`` (m) of p frames, with their blended transforms
+    ``(p, N, 3, 4)``, and the points before skinning ``(p, N, 3)`` that skin to them; with the
+    canonical body's ``sdf``, those whose own preimage (less the shape ``offsets``
+    ``(p, N, 3)``) is within ε of the body moved out with it (:meth:`Smoothing.apply`). ``x``
+    ``(p, N, 3)``: the canonical garments posed; ``floor`` ``(p, N)``: a lower bound on their
+    SDF (m), or None."""
+    unposed = unskin_blended(vertices, blended)  # (p, N, 3): shaped rest frame
+    if sdf is None:
         return vertices, unposed
+    canonical = unposed - offsets  # less the shape offsets B̃s(X)·β
+    if floor is not None:
+        floor = floor - LIPSCHITZ * (canonical - x).norm(dim=-1)
+    move = push_out_canonical(canonical, sdf, floor=floor)[0] - canonical  # zero for most
+    frame, vertex = move.any(-1).nonzero(as_tuple=True)  # the few moved
+    step = move[frame, vertex]
+    vertices[frame, vertex] += torch.einsum("mab,mb->ma", blended[frame, vertex, :, :3], step)
+    unposed[frame, vertex] += step
+    return vertices, unposed
 
 
 def available_cores() -> int:
