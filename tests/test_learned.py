@@ -406,7 +406,7 @@ def test_the_recipe_script_trains_the_shipped_members_steps(garment: str, tmp_pa
     30-frame crops with the member's seed, no fine-tuning), then each regressor step from a copy
     of the step before (the folder that the step's settings start from), the last with the file
     that the shipped member's command names; then joins the three members with the shipped
-    model's latent smoothing."""
+    model's latent and posed smoothing."""
     from usd_garment.methods.learned import shipped_model
     from usd_garment.training.pipeline import TrainSettings
 
@@ -455,6 +455,7 @@ def test_the_recipe_script_trains_the_shipped_members_steps(garment: str, tmp_pa
     assert combine[:2] == ["train", "combine"] and combine[2:5] == last_steps
     smoothing = float(combine[combine.index("--latent-smoothing") + 1])
     assert smoothing == model.latent_smoothing
+    assert float(combine[combine.index("--posed-smoothing") + 1]) == model.posed_smoothing
 
 
 def test_the_recipe_script_trains_again_with_other_seeds(tmp_path: Path) -> None:

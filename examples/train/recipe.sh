@@ -12,7 +12,8 @@
 #                                → tshirt_J (λ 1.5, 60 epochs); no latent smoothing
 #   dress (version 9, stop 39):  dress_D30 → dress_L0 on v4css → dress_L (λ 7.7, 30 epochs);
 #                                0.1 s latent smoothing
-#   (the T-shirt's version 8 and the dress's version 10: the same recipes on the rest sets)
+#   (the T-shirt's version 8 and the dress's version 10: the same recipes on the rest sets;
+#   the T-shirt's version 9, stop 77: version 8's members, its posed garment smoothed over 1/60 s)
 # The run folders go to RUNS/GARMENT_STEP_m{0,1,2} (RUNS: scratch/runs, which the settings'
 # init_from name); a step whose run folder holds its result is skipped, so an interrupted run
 # goes on where it stopped. Run it from the repository root. DEVICE=cuda trains on a GPU; VERSION
@@ -38,9 +39,9 @@ DATA=${3:-scratch}
 # STEPS: the regressor's steps after the first, NAME:SETTINGS:PLANES (SETTINGS empty: the run
 # folder's own; PLANES: a fine-tuning of the step before, with the posed planes)
 case $GARMENT in
-    tshirt) FIRST=tshirt_member START=T30 SET=v4cs SMOOTHING=0.0
+    tshirt) FIRST=tshirt_member START=T30 SET=v4cs SMOOTHING=0.0 POSED=0.016666666666666666
         STEPS="J0:tshirt_member: J1:tshirt_v6_step1_member:planes J:tshirt_v6_member:planes" ;;
-    dress) FIRST=dress_v9_step1_member START=D30 SET=v4css SMOOTHING=0.1
+    dress) FIRST=dress_v9_step1_member START=D30 SET=v4css SMOOTHING=0.1 POSED=0.0
         STEPS="L0:: L:dress_v9_member:planes" ;;
     *) echo "recipe.sh: the garment is tshirt or dress, not '$GARMENT'" >&2; exit 2 ;;
 esac
@@ -128,6 +129,6 @@ if [ ${#MEMBER_LIST[@]} -ne 3 ]; then
     exit
 fi
 usd-garment train combine "$RUNS/${GARMENT}_${name}"_m{0,1,2} --out "$MODEL" \
-    --latent-smoothing $SMOOTHING --version "${VERSION:-retrained}"
+    --latent-smoothing $SMOOTHING --posed-smoothing $POSED --version "${VERSION:-retrained}"
 exit
 }
