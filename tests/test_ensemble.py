@@ -181,19 +181,27 @@ def test_posed_smoothing_is_a_gaussian_over_the_posed_frames(tmp_path, body, tem
     """``train combine --posed-smoothing S``: the posed garment is smoothed by a Gaussian of S
     seconds at the input's frame rate, the nearest frame repeated at the ends, and a motion
     streamed in chunks is smoothed as it is whole (each chunk posed with the frames around it
-    that the Gaussian reaches); ``train member`` keeps it; a negative one is refused."""
+    that the Gaussian reaches); ``train member`` keeps it; a negative one is refused. The
+    networks alone (``learned``) are not smoothed: nothing would keep the smoothed vertices out
+    of their own body parts (``LearnedMethod.smooths``); the smoothing alone is checked here
+    through a method that smooths with no push at all."""
     from usd_garment.methods.learned import LearnedMethod
+
+    class SmoothedAlone(LearnedMethod):
+        smooths = True
 
     (first, second), out, info = _smoothed(tmp_path, body, template, "posed", "0.05")
     assert info["latent_smoothing_s"] == 0.0
     plain_dir = tmp_path / "plain"
     assert _run(["train", "combine", first, second, "--out", plain_dir])[0] == 0
     motion = make_motion("walk", 40, 30.0, seed=2, body=body)
-    smoothed = LearnedMethod(out, exact_fields=True).predict_stream(motion, body, template, 7)
+    smoothed = SmoothedAlone(out, exact_fields=True).predict_stream(motion, body, template, 7)
     chunks = list(smoothed)
     assert [len(c) for c in chunks] == [7] * 5 + [5]
     whole = LearnedMethod(plain_dir, exact_fields=True).predict_stream(motion, body, template, 40)
     raw = np.concatenate(list(whole))
+    alone = LearnedMethod(out, exact_fields=True).predict_stream(motion, body, template, 40)
+    assert np.array_equal(np.concatenate(list(alone)), raw)  # learned: not smoothed
     # 0.05 s at 30 fps: σ = 1.5 frames, reaching int(4 σ + 0.5) = 6 frames around each chunk.
     expected = gaussian_filter1d(raw, 1.5, axis=0, mode="nearest")
     np.testing.assert_allclose(np.concatenate(chunks), expected, atol=2e-5)

@@ -683,9 +683,10 @@ def test_posing_workers_stream_the_garment_of_one_process(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:  # fmt: skip
     """``learned+preimage`` with two forked workers (each chunk posed and pushed there while
-    this process decodes the next) streams the garment of one process to the bit, in chunks of
-    the size asked for, in order, with this process's torch threads as they were; a motion of
-    fewer than two chunks a worker is posed in this process."""
+    this process decodes the next) streams the garment of one process to the bit (the shipped
+    T-shirt's networks without a posed smoothing), in chunks of the size asked for, in order,
+    with this process's torch threads as they were; a motion of fewer than two chunks a worker
+    is posed in this process."""
     import usd_garment.methods.learned as learned
     from usd_garment.methods.learned_posing import PosingPool, can_fork
     from usd_garment.usd.read import read_smpl_motion
@@ -706,9 +707,21 @@ def test_posing_workers_stream_the_garment_of_one_process(
     write_body_layer(body, make_motion("walk", 11, 30.0, seed=4, body=body_model), body_model)
     motion, _ = read_smpl_motion(body, body_model)
     template = load_template("tshirt", "low")
-    one = list(learned.LearnedPreimageMethod().predict_stream(motion, body_model, template, 3))
+    config = json.loads((learned.shipped_model("tshirt") / "model.json").read_text())
+    models = {}
+    for name, seconds in (("plain", 0.0), ("smoothed", 1 / 30)):
+        models[name] = tmp_path / name
+        shutil.copytree(learned.shipped_model("tshirt"), models[name])
+        (models[name] / "model.json").write_text(
+            json.dumps({**config, "posed_smoothing_s": seconds})
+        )
+    one = list(
+        learned.LearnedPreimageMethod(models["plain"]).predict_stream(
+            motion, body_model, template, 3
+        )
+    )
     threads = torch.get_num_threads()
-    method = learned.LearnedPreimageMethod()
+    method = learned.LearnedPreimageMethod(models["plain"])
     method.workers = 2
     two = list(method.predict_stream(motion, body_model, template, 3))
     assert submitted == [3, 3, 3, 2] and [len(p) for p in two] == [3, 3, 3, 2]
@@ -719,10 +732,7 @@ def test_posing_workers_stream_the_garment_of_one_process(
     assert submitted == [] and [len(p) for p in three] == [4, 4, 3]
     assert method.seconds["workers"] == 0 and method.seconds["preimage"] > 0
     # A posed smoothing: each chunk goes with the frames around it and comes back alone.
-    smoothed = tmp_path / "smoothed"
-    shutil.copytree(learned.shipped_model("tshirt"), smoothed)
-    config = json.loads((smoothed / "model.json").read_text())
-    (smoothed / "model.json").write_text(json.dumps({**config, "posed_smoothing_s": 1 / 30}))
+    smoothed = models["smoothed"]
     submitted.clear()
     one = list(learned.LearnedPreimageMethod(smoothed).predict_stream(motion, body_model,
                                                                          template, 3))  # fmt: skip

@@ -215,6 +215,15 @@ class LearnedMethod:
         return self.preimage or self.push_out
 
     @property
+    def smooths(self) -> bool:
+        """Whether the model's posed smoothing applies: only where something keeps the smoothed
+        vertices out of their own body parts (the canonical push's guard, ``Smoothing.apply``, or
+        the posed push-out). The networks alone (``learned``) are not smoothed: with the T-shirt's
+        version 9 they left 0.374 % inside elsewhere smoothed against 0.287 % not, on the test
+        split of stop 59's chart (stop 77)."""
+        return self.canonical_push or self.push_out
+
+    @property
     def settings(self) -> dict[str, Any]:
         out: dict[str, Any] = {
             "model": str(self.model_path) if self.model_path else "shipped",
@@ -231,6 +240,7 @@ class LearnedMethod:
                 members=len(self._model.members),
                 version=self._model.version,
                 body_fingerprint=self._model.body_fingerprint,
+                posed_smoothing_s=self._model.posed_smoothing if self.smooths else 0.0,
             )
         return out
 
@@ -283,12 +293,12 @@ class LearnedMethod:
         """Posed garment points in consecutive chunks ``(t ≤ chunk, N, 3)`` float32 (m): the
         latent codes of the whole motion first (the GRU, ``(T, L)``: small), then each chunk
         decoded and posed (with the frames around it that the model's posed smoothing reaches,
-        which smooths the chunk as it would the whole motion: ``Smoothing``), then pushed out
-        where the method does. A ``template`` coarser than the model's level of detail gets the
-        model's garment carried down to it (``carry_to_lod``): with the preimage push, the
-        decoded canonical garment, before anything else (the pushes, the fields and the posing
-        then work on the vertices written); else the posed garment (a draft from the same
-        networks).
+        which smooths the chunk as it would the whole motion: ``Smoothing``; where the method
+        :attr:`smooths`), then pushed out where the method does. A ``template`` coarser than
+        the model's level of detail gets the model's garment carried down to it
+        (``carry_to_lod``): with the preimage push, the decoded canonical garment, before
+        anything else (the pushes, the fields and the posing then work on the vertices
+        written); else the posed garment (a draft from the same networks).
 
         Raises:
             ModelError: no usable model, or one trained on another template (or a coarser
@@ -330,7 +340,7 @@ class LearnedMethod:
         tangents: list[Tangent] = []  # the last one is kept across chunks (_tangents)
         lap("load")
         z = predict_latents(model, motion)
-        smoothing = Smoothing.of(model.posed_smoothing, motion.fps)
+        smoothing = Smoothing.of(model.posed_smoothing if self.smooths else 0.0, motion.fps)
         lap("regressor")
         posing = self._posing_pool(garment_model, betas, boxes, -(-t_frames // chunk))
         pending: deque[Future[np.ndarray]] = deque()  # the chunks the workers have, in order

@@ -10,7 +10,8 @@ once (an ensemble; :func:`combine_models` makes one from trained models).
 A model may smooth its latent codes in time before decoding (``latent_smoothing_s``: the standard
 deviation, in seconds, of a Gaussian over the codes at the model's 30 fps; 0, no smoothing), and
 its posed garment before any push-out (``posed_smoothing_s``: the same over the posed vertices at
-the input's frame rate; 0, none).
+the input's frame rate; 0, none; the networks alone, ``learned``, leave it out:
+``LearnedMethod.smooths``).
 
 ``model.json`` also carries what a person needs to trust it: the command and configuration that
 trained it (each member's, for an ensemble), the training wall time and machine, and its
