@@ -201,6 +201,13 @@ def test_error_budget_picks_the_fastest_method_that_meets_it(
         tmp_path, body_layer,
     )  # fmt: skip
     assert "measured with another model (version 5, weights 0123456789abcdef)" in message
+    renamed = {**model_identity(model), "version": "next"}  # the same networks, a new version
+    save_budget(model / BUDGET_FILE, table, {"command": "test", "model": renamed})
+    message = _assert_clean_failure(
+        ["dress", body_layer, "-o", tmp_path / "b.usdc", "--model", model, "--error-budget", 20],
+        tmp_path, body_layer,
+    )  # fmt: skip
+    assert f"measured with another model (version next, weights {renamed['weights']})" in message
     both = _run(["dress", body_layer, "-o", tmp_path / "x.usdc", "--error-budget", 20, "--lod",
                  "low"])  # fmt: skip
     assert both[0] == 2 and "give --error-budget or --lod, not both" in both[1] + both[2]

@@ -6,8 +6,9 @@ The figures come from a bench report (``budget.json`` in the report folder, one 
 × level of detail: frame-weighted means over the inputs that have a simulated reference); a
 model directory ships the table measured with its model, so ``dress --error-budget MM`` picks
 from it without running anything. A table whose learned entries were measured with a model
-names it (``source["model"]``: version and weights digest); a model directory whose weights are
-not those is refused, so a retrained model never picks from its predecessor's figures.
+names it (``source["model"]``: version and weights digest); a model directory of another version
+or other weights is refused, so a retrained model never picks from its predecessor's figures, nor
+a new version of the same networks (e.g. one that smooths its garment) from its own.
 """
 
 from __future__ import annotations
@@ -127,8 +128,8 @@ def pick_for_budget(garment: str, model: str | Path | None, error_mm: float) -> 
     ``garment``).
 
     Raises:
-        BudgetError: no model, no table, a table measured with other weights than the model's,
-            or nothing meets the budget.
+        BudgetError: no model, no table, a table measured with another version or other
+            weights than the model's, or nothing meets the budget.
     """
     folder = Path(model) if model is not None else shipped_model(garment)
     if folder is None:
@@ -137,7 +138,7 @@ def pick_for_budget(garment: str, model: str | Path | None, error_mm: float) -> 
     measured = source.get("model")  # absent from tables made before the bench named its model
     if isinstance(measured, dict):
         present = model_identity(folder)
-        if measured.get("weights") != present["weights"]:
+        if any(measured.get(key) != present[key] for key in ("version", "weights")):
             raise BudgetError(
                 f"{folder / BUDGET_FILE} was measured with another model (version "
                 f"{measured.get('version')}, weights {measured.get('weights')}), not this one "
