@@ -326,7 +326,8 @@ def combine(
     training curves and log are copied beside the model (curves_member{i}.png,
     train_member{i}.log). With --latent-smoothing the codes are smoothed in time first (the
     shipped dress: 0.1 s, docs/learning.md); with --posed-smoothing the posed garment is, before
-    it is pushed out of the body."""
+    it is pushed out of the body (the shipped T-shirt: 1/60 s; not the networks alone, where
+    nothing would push it out)."""
     with user_errors():
         from usd_garment.methods.learned_model import (
             combine_models,
