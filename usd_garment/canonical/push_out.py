@@ -51,7 +51,8 @@ def push_out_canonical(
         if floor is None:
             mean = out.mean(dim=0)
             floor = sdf(mean)[None] - LIPSCHITZ * (out - mean).norm(dim=-1)  # (B, N), m
-        floor = floor.clone()
+        else:
+            floor = floor.clone()  # the caller's is left as it was
         candidates = (floor < epsilon + MARGIN).view(-1).nonzero().squeeze(1)
     flat, known = out.view(-1, 3), floor.view(-1)
     for _ in range(passes):

@@ -223,6 +223,10 @@ class LearnedMethod:
         split of stop 59's chart (stop 77)."""
         return self.canonical_push or self.push_out
 
+    def posed_smoothing(self, model: LearnedModel) -> float:
+        """``model``'s posed smoothing (s) where this method :attr:`smooths`, else 0."""
+        return model.posed_smoothing if self.smooths else 0.0
+
     @property
     def settings(self) -> dict[str, Any]:
         out: dict[str, Any] = {
@@ -240,7 +244,7 @@ class LearnedMethod:
                 members=len(self._model.members),
                 version=self._model.version,
                 body_fingerprint=self._model.body_fingerprint,
-                posed_smoothing_s=self._model.posed_smoothing if self.smooths else 0.0,
+                posed_smoothing_s=self.posed_smoothing(self._model),
             )
         return out
 
@@ -340,7 +344,7 @@ class LearnedMethod:
         tangents: list[Tangent] = []  # the last one is kept across chunks (_tangents)
         lap("load")
         z = predict_latents(model, motion)
-        smoothing = Smoothing.of(model.posed_smoothing if self.smooths else 0.0, motion.fps)
+        smoothing = Smoothing.of(self.posed_smoothing(model), motion.fps)
         lap("regressor")
         posing = self._posing_pool(garment_model, betas, boxes, -(-t_frames // chunk))
         pending: deque[Future[np.ndarray]] = deque()  # the chunks the workers have, in order

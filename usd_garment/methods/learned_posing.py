@@ -129,8 +129,8 @@ class Smoothing:
             if a < b:
                 frames = slice(a, b)
                 out.append(_own_preimages(
-                    smoothed[frames], blended[a - start : b - start], before[frames] - x[frames],
-                    x[frames], sdf, None if floor is None else floor[frames],
+                    smoothed[frames], blended[a - start : b - start], before[frames], x[frames],
+                    sdf, None if floor is None else floor[frames],
                 ))  # fmt: skip
             start = stop
         return torch.cat([v for v, _ in out]), torch.cat([u for _, u in out])
@@ -139,21 +139,21 @@ class Smoothing:
 def _own_preimages(
     vertices: torch.Tensor,
     blended: torch.Tensor,
-    offsets: torch.Tensor,
+    before: torch.Tensor,
     x: torch.Tensor,
     sdf: Callable[[torch.Tensor], torch.Tensor] | None,
     floor: torch.Tensor | None,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Smoothed vertices ``(p, N, 3)`` (m) of p frames, with their blended transforms
     ``(p, N, 3, 4)``, and the points before skinning ``(p, N, 3)`` that skin to them; with the
-    canonical body's ``sdf``, those whose own preimage (less the shape ``offsets``
-    ``(p, N, 3)``) is within ε of the body moved out with it (:meth:`Smoothing.apply`). ``x``
-    ``(p, N, 3)``: the canonical garments posed; ``floor`` ``(p, N)``: a lower bound on their
-    SDF (m), or None."""
+    canonical body's ``sdf``, those whose own preimage is within ε of the body moved out with
+    it (:meth:`Smoothing.apply`). ``x`` ``(p, N, 3)``: the canonical garments posed, to the
+    points ``before`` ``(p, N, 3)`` skinning; ``floor`` ``(p, N)``: a lower bound on their SDF
+    (m), or None."""
     unposed = unskin_blended(vertices, blended)  # (p, N, 3): shaped rest frame
     if sdf is None:
         return vertices, unposed
-    canonical = unposed - offsets  # less the shape offsets B̃s(X)·β
+    canonical = unposed - (before - x)  # less the shape offsets B̃s(X)·β
     if floor is not None:
         floor = floor - LIPSCHITZ * (canonical - x).norm(dim=-1)
     move = push_out_canonical(canonical, sdf, floor=floor)[0] - canonical  # zero for most
