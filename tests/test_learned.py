@@ -826,3 +826,34 @@ def test_posed_smoothing_keeps_a_vertex_out_of_its_own_part() -> None:
     torch.testing.assert_close(kept / kept.norm(dim=-1, keepdim=True), direction)  # straight out
     plain, same = Smoothing().apply(x, posed, core, ball)
     assert torch.equal(plain, x[core]) and torch.equal(same, x[core])
+
+
+def test_posed_smoothing_stops_at_the_cuts() -> None:
+    """A garment teleported 0.5 m at a cut (``root_cuts``) is smoothed on each side of it on
+    its own, the nearest frame repeated there as at the motion's ends: no frame is carried
+    towards the other side (across the jump, a Gaussian of one frame would move the frames
+    beside it 0.12 m); a chunk is smoothed as the whole motion with the cuts
+    ``Smoothing.within`` it."""
+    from usd_garment.methods.learned_posing import Smoothing
+
+    frames = torch.arange(20, dtype=torch.float32)
+    x = torch.stack([0.01 * frames, torch.zeros(20), torch.zeros(20)], -1)[:, None]  # (20, 1, 3)
+    x[10:, 0, 2] += 0.5  # the jump: frames 10 on
+    posed = (x, x, [torch.eye(4)[:3].expand(20, 1, 3, 4)])
+    whole = Smoothing.of(1 / 30, 30.0, (10,))
+    smoothed, _ = whole.apply(x, posed, slice(0, 20), None)
+    runs = [
+        gaussian_filter1d(x[a:b].numpy(), 1.0, axis=0, mode="nearest")
+        for a, b in ((0, 10), (10, 20))
+    ]
+    torch.testing.assert_close(smoothed, torch.from_numpy(np.concatenate(runs)))
+    assert float((smoothed - x)[..., 2].abs().max()) == 0.0  # nothing across the jump
+    assert float((smoothed - x).norm(dim=-1).max()) < 0.01  # a run's ends: within a step
+    crossed, _ = Smoothing.of(1 / 30, 30.0).apply(x, posed, slice(0, 20), None)
+    assert float((crossed - x).norm(dim=-1).max()) > 0.1
+    # The frames 7..13 of the motion as a chunk with the radius (4) around them, 3..17: the cut
+    # at its frame 7 (beyond it, none).
+    assert whole.within(3, 17) == Smoothing(1.0, (7,)) and whole.within(10, 20).cuts == ()
+    piece = (x[3:17], x[3:17], [posed[2][0][3:17]])
+    chunk, _ = whole.within(3, 17).apply(x[3:17], piece, slice(4, 10), None)
+    torch.testing.assert_close(chunk, smoothed[7:13])

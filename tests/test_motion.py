@@ -38,6 +38,7 @@ from usd_garment.usd.read import read_smpl_motion
 J = {name: i for i, name in enumerate(SMPL_JOINT_NAMES)}
 FPS = 30.0
 FRAMES = 90  # 3 s
+MOCAP = Path("/work/shared/mocap")  # the shared CMU captures
 
 
 def _posed(body: BodyModel, motion: SmplMotion) -> BodyOutput:
@@ -331,3 +332,39 @@ def test_cli_bad_input_is_one_line_and_writes_nothing(tmp_path: Path, args: list
     assert result.exit_code != 0
     assert "Traceback" not in result.output and "Error" in result.output
     assert list(tmp_path.iterdir()) == []
+
+
+# --- cuts: where smoothing over frames must stop ------------------------------------------------
+
+
+def test_root_cuts_find_the_stress_suites_jumps_and_nothing_in_real_motion(
+    motions: dict[str, SmplMotion], body_model: BodyModel
+) -> None:
+    """The stress suite's root jumps (0.5 m sideways at a third, the heading snapped by 90° at
+    two thirds) are cuts, at the frames where they land; no procedural motion has one, nor the
+    shared CMU captures at 30 frames/s (their roots' steps differ by at most about 0.02 m and
+    0.25 rad from one to the next); a one-frame glitch of the root is a cut in and a cut out; a
+    heading snapped by 60° is a cut at 30 frames/s, not at 5 (where a real turn may speed up
+    that much from one step to the next)."""
+    from usd_garment.eval.stress import _root_jumps
+    from usd_garment.motion.bvh import read_bvh, retarget
+    from usd_garment.motion.cuts import root_cuts
+
+    for kind, motion in motions.items():
+        assert root_cuts(motion) == (), kind
+        assert root_cuts(_root_jumps(motion)) == (FRAMES // 3, 2 * FRAMES // 3), kind
+    for clip in ("01", "02", "03"):
+        capture, _ = retarget(read_bvh(MOCAP / f"cmu_131_{clip}.bvh"), body_model, arm_clearance=0)
+        every = round(capture.fps / FPS)
+        at_30 = SmplMotion(capture.betas, capture.pose[::every], capture.trans[::every], FPS)
+        assert at_30.num_frames > 200 and root_cuts(at_30) == (), clip
+    walk = motions["walk"]
+    trans = walk.trans.copy()
+    trans[40, 2] += 0.3
+    assert root_cuts(SmplMotion(walk.betas, walk.pose, trans, FPS)) == (40, 41)
+    pose = walk.pose.copy()
+    snap = Rotation.from_rotvec([0.0, np.pi / 3, 0.0])
+    pose[45:, 0] = (snap * Rotation.from_rotvec(pose[45:, 0])).as_rotvec()
+    assert root_cuts(SmplMotion(walk.betas, pose, walk.trans, FPS)) == (45,)
+    assert root_cuts(SmplMotion(walk.betas, pose, walk.trans, 5.0)) == ()
+    assert root_cuts(SmplMotion(walk.betas, walk.pose[:2], walk.trans[:2], FPS)) == ()

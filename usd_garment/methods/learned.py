@@ -49,6 +49,7 @@ from usd_garment.methods.learned_posing import (
     can_fork,
     pose_chunk,
 )
+from usd_garment.motion.cuts import root_cuts
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.regressor.descriptor import MODEL_FPS, describe_motion
 
@@ -344,7 +345,8 @@ class LearnedMethod:
         tangents: list[Tangent] = []  # the last one is kept across chunks (_tangents)
         lap("load")
         z = predict_latents(model, motion)
-        smoothing = Smoothing.of(self.posed_smoothing(model), motion.fps)
+        seconds = self.posed_smoothing(model)
+        smoothing = Smoothing.of(seconds, motion.fps, root_cuts(motion) if seconds > 0 else ())
         lap("regressor")
         posing = self._posing_pool(garment_model, betas, boxes, -(-t_frames // chunk))
         pending: deque[Future[np.ndarray]] = deque()  # the chunks the workers have, in order
@@ -363,7 +365,7 @@ class LearnedMethod:
                 e = min(s + chunk, t_frames)
                 # the chunk and the frames around it that its smoothing reaches
                 a, b = max(0, s - smoothing.radius), min(t_frames, e + smoothing.radius)
-                core = slice(s - a, e - a)
+                core, smooth = slice(s - a, e - a), smoothing.within(a, b)
                 with torch.no_grad():
                     x = model.decode(z[a:b])
                     lap("decoder")
@@ -381,16 +383,16 @@ class LearnedMethod:
                     parts = [(part.frames, part.tangent) for part in tangents]
                     lap("fields")
                     if posing is not None:  # posed and pushed there, in the order given
-                        work = (x, floor, parts, pose[a:b], trans[a:b], core, smoothing)
+                        work = (x, floor, parts, pose[a:b], trans[a:b], core, smooth)
                         pending.append(posing.submit(*work))
                         while len(pending) > posing.workers:  # one chunk waits for a worker
                             yield collect()
                             clock[0] = time.perf_counter()
                         continue
                     art = garment_model.articulation(betas, pose[a:b], trans[a:b])
-                    posed = pose_chunk(garment_model, x, parts, art, smoothing.sigma > 0)
+                    posed = pose_chunk(garment_model, x, parts, art, smooth.sigma > 0)
                     sdf = self._fields.sdf if self.canonical_push else None
-                    vertices, unposed = smoothing.apply(x, posed, core, sdf, floor)
+                    vertices, unposed = smooth.apply(x, posed, core, sdf, floor)
                     lap("posing")
                     if boxes is not None:  # the whole chunk at once: fewer, larger steps
                         vertices = preimage_push(

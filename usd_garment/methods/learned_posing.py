@@ -15,6 +15,7 @@ Units: metres.
 
 from __future__ import annotations
 
+import itertools
 import multiprocessing
 import os
 from collections.abc import Callable, Sequence
@@ -76,20 +77,39 @@ TRUNCATE = 4.0
 class Smoothing:
     """A Gaussian of ``sigma`` frames over the frames of a posed garment (``LearnedModel``'s
     ``posed_smoothing`` at the input's frame rate; 0: none), the nearest frame repeated beyond
-    the motion's ends. A chunk of frames is smoothed as the whole motion would be where it is
-    posed with :attr:`radius` frames of the motion on each side (fewer at its ends)."""
+    the motion's ends and on each side of its ``cuts`` (the frames where it starts anew,
+    :func:`~usd_garment.motion.cuts.root_cuts`: across a teleport of the root the Gaussian
+    would carry the garment a frame off the body). A chunk of frames is smoothed as the whole
+    motion would be where it is posed with :attr:`radius` frames of the motion on each side
+    (fewer at its ends), with the cuts :meth:`within` it."""
 
     sigma: float = 0.0
+    cuts: tuple[int, ...] = ()
 
     @classmethod
-    def of(cls, seconds: float, fps: float) -> Smoothing:
+    def of(cls, seconds: float, fps: float, cuts: tuple[int, ...] = ()) -> Smoothing:
         """The smoothing of ``seconds`` (standard deviation) at ``fps`` frames a second."""
-        return cls(seconds * fps)
+        return cls(seconds * fps, cuts)
 
     @property
     def radius(self) -> int:
         """Frames of the motion the Gaussian reaches on each side of a frame."""
         return int(TRUNCATE * self.sigma + 0.5) if self.sigma > 0 else 0
+
+    def within(self, start: int, stop: int) -> Smoothing:
+        """This smoothing of the frames ``start`` to ``stop`` of the motion: the cuts among
+        them, counted from ``start``."""
+        return Smoothing(self.sigma, tuple(k - start for k in self.cuts if start < k < stop))
+
+    def _filter(self, points: np.ndarray) -> np.ndarray:
+        """The Gaussian over the frames of ``points`` ``(t, N, 3)``, each run between cuts on
+        its own."""
+        ends = (0, *self.cuts, len(points))
+        runs = [points[a:b] for a, b in itertools.pairwise(ends)]
+        return np.concatenate([
+            gaussian_filter1d(run, self.sigma, axis=0, mode="nearest", truncate=TRUNCATE)
+            for run in runs
+        ])  # fmt: skip
 
     def apply(
         self,
@@ -118,9 +138,7 @@ class Smoothing:
         if self.sigma <= 0:
             return points[core], before[core]
         assert pieces is not None, "pose_chunk(..., blended=True) for a smoothing"
-        smoothed = torch.from_numpy(
-            gaussian_filter1d(points.numpy(), self.sigma, axis=0, mode="nearest", truncate=TRUNCATE)
-        )
+        smoothed = torch.from_numpy(self._filter(points.numpy()))
         out: list[tuple[torch.Tensor, torch.Tensor]] = []
         start = 0
         for blended in pieces:  # the core's frames piece by piece

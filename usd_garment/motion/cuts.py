@@ -1,0 +1,48 @@
+"""Cuts in a motion: frames where the root jumps (a teleport, a heading snapped, two clips joined
+end to end), so that what is smoothed over frames is not smoothed across them.
+
+Units: metres, radians, frames per second.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from usd_garment.motion.sequence import SmplMotion
+
+#: A root step that differs from both steps beside it by more than this (m) or
+#: :data:`CUT_ROTATION` (rad) starts a cut (where nothing physical accelerates the root faster
+#: than :data:`CUT_ACCELERATION` at the motion's frame rate). Real captures stay under 0.021 m
+#: and 0.25 rad at 30 frames/s (docs/judge.md, stop 78); the stress suite's root jumps are
+#: 0.5 m and π/2.
+CUT_DISTANCE = 0.1
+CUT_ROTATION = 0.5
+#: Root accelerations (m/s², and rad/s² for the turn) that a motion may have without a cut: at a
+#: low frame rate a real step may change more than :data:`CUT_DISTANCE` from one to the next.
+CUT_ACCELERATION = 50.0
+CUT_ANGULAR_ACCELERATION = 400.0
+
+
+def root_cuts(motion: SmplMotion) -> tuple[int, ...]:
+    """The frames ``k`` (1 ≤ k < T) where ``motion`` starts anew: the root's step from frame
+    k − 1 to k (its translation, m, or its turn, rad, in the world frame) differs from each
+    step beside it (one at the motion's ends; none: no cut) by more than the thresholds."""
+    if motion.num_frames < 3:
+        return ()
+    dt2 = 1.0 / motion.fps**2
+    move = np.diff(motion.trans, axis=0)  # (T-1, 3)
+    orientation = Rotation.from_rotvec(motion.pose[:, 0])
+    turn = (orientation[1:] * orientation[:-1].inv()).as_rotvec()  # (T-1, 3)
+    cut = _outliers(move, max(CUT_DISTANCE, CUT_ACCELERATION * dt2))
+    cut |= _outliers(turn, max(CUT_ROTATION, CUT_ANGULAR_ACCELERATION * dt2))
+    return tuple(int(k) + 1 for k in np.flatnonzero(cut))
+
+
+def _outliers(steps: np.ndarray, limit: float) -> np.ndarray:
+    """``(S,)`` bool: the steps ``(S, 3)`` (S ≥ 2) that differ from each neighbour by more
+    than ``limit``."""
+    change = np.linalg.norm(np.diff(steps, axis=0), axis=-1) > limit  # (S-1,): k against k+1
+    before = np.concatenate([change[:1], change])  # step k against step k-1 (k = 0: its next)
+    after = np.concatenate([change, change[-1:]])  # step k against step k+1 (the last: before)
+    return before & after
