@@ -159,6 +159,32 @@ def test_describe_motion_resamples_to_model_rate() -> None:
         motion_descriptor(pose, trans, _codec(), padding="mirror")
 
 
+def test_the_runs_between_cuts_are_described_on_their_own() -> None:
+    """A root teleported 0.5 m (a cut, ``root_cuts``): γ of each run between cuts on its own,
+    so the regressor never sees the jump as a velocity (15 m/s at 30 fps); at 25 frames/s the
+    frame resampled between the cut and the frame before it is that frame, not a blend of the
+    two sides, and the cut lands on the first 30 fps frame at or after it."""
+    from usd_garment.motion.resample import resample_motion, resampled_cuts
+
+    pose, trans = wandering_motion(50)
+    trans[20:, 0] += 0.5
+    motion = SmplMotion(betas=np.zeros(10), pose=pose, trans=trans, fps=MODEL_FPS)
+    gamma, _ = describe_motion(motion, _codec())
+    runs = [motion_descriptor(pose[a:b], trans[a:b], _codec()) for a, b in ((0, 20), (20, 50))]
+    torch.testing.assert_close(gamma, torch.cat(runs))
+    speed = gamma[:, descriptor_layout()["trans_vel"]].norm(dim=-1)
+    assert float(speed.max()) < 3.0  # the path's own speed
+    jumped = motion_descriptor(pose, trans, _codec())[:, descriptor_layout()["trans_vel"]]
+    assert float(jumped.norm(dim=-1).max()) > 14.0
+    slow = SmplMotion(betas=np.zeros(10), pose=pose, trans=trans, fps=25.0)
+    resampled = resample_motion(slow, MODEL_FPS, (20,))
+    assert resampled_cuts((20,), 25.0, MODEL_FPS) == (24,)  # 20 / 25 s = 24 / 30 s
+    np.testing.assert_array_equal(resampled.trans[23], trans[19])  # 23 / 30 s: 19.17 / 25
+    np.testing.assert_allclose(resampled.trans[22], trans[18] + 1 / 3 * (trans[19] - trans[18]))
+    blended = resample_motion(slow, MODEL_FPS).trans[23]
+    assert 0.05 < blended[0] - trans[19, 0] < 0.5  # without the cut: partly across the jump
+
+
 # --- GRU regressor ------------------------------------------------------------------------
 
 

@@ -2,15 +2,20 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from usd_garment.motion.sequence import SmplMotion
 
 
-def resample_motion(motion: SmplMotion, fps: float) -> SmplMotion:
+def resample_motion(motion: SmplMotion, fps: float, cuts: Sequence[int] = ()) -> SmplMotion:
     """``motion`` sampled at ``fps`` over the same duration (first frame kept, last frame at or
-    before the original end). Time codes restart at 0, one per frame."""
+    before the original end). Time codes restart at 0, one per frame. A frame that falls between
+    a cut (a frame of ``cuts``, where the motion starts anew: ``root_cuts``) and the frame
+    before it is that frame before, not a blend of the two sides; the cuts of the result are
+    :func:`resampled_cuts`."""
     if not np.isfinite(fps) or fps <= 0:
         raise ValueError(f"fps must be positive, got {fps}")
     t = motion.num_frames
@@ -23,7 +28,7 @@ def resample_motion(motion: SmplMotion, fps: float) -> SmplMotion:
     count = int(np.floor(duration * fps + 1e-6)) + 1
     u = np.arange(count) / fps * motion.fps  # fractional source frame of each output frame
     i0 = np.minimum(np.floor(u).astype(int), t - 2)
-    alpha = (u - i0)[:, None]
+    alpha = np.where(np.isin(i0 + 1, cuts), 0.0, u - i0)[:, None]
     trans = (1.0 - alpha) * motion.trans[i0] + alpha * motion.trans[i0 + 1]
     j = motion.pose.shape[1]
     r0 = Rotation.from_rotvec(motion.pose[i0].reshape(-1, 3).astype(np.float64))
@@ -38,3 +43,11 @@ def resample_motion(motion: SmplMotion, fps: float) -> SmplMotion:
         gender=motion.gender,
         model=motion.model,
     )
+
+
+def resampled_cuts(cuts: Sequence[int], fps: float, to_fps: float) -> tuple[int, ...]:
+    """The frames at ``to_fps`` where the cuts ``cuts`` of a motion at ``fps`` fall after
+    :func:`resample_motion`: the first at or after each cut's time."""
+    if np.isclose(fps, to_fps):
+        return tuple(cuts)
+    return tuple(int(np.ceil(k * to_fps / fps - 1e-6)) for k in cuts)
