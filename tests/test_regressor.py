@@ -178,11 +178,19 @@ def test_the_runs_between_cuts_are_described_on_their_own() -> None:
     assert float(jumped.norm(dim=-1).max()) > 14.0
     slow = SmplMotion(betas=np.zeros(10), pose=pose, trans=trans, fps=25.0)
     resampled = resample_motion(slow, MODEL_FPS, (20,))
-    assert resampled_cuts((20,), 25.0, MODEL_FPS) == (24,)  # 20 / 25 s = 24 / 30 s
+    assert resampled_cuts((20,), 25.0, MODEL_FPS, 59) == (24,)  # 20 / 25 s = 24 / 30 s
+    # At 120 frames/s: a one-frame glitch (two cuts) between two frames at 30 is one cut there,
+    # and a cut after the last frame at 30 none.
+    assert resampled_cuts((5, 6, 49), 120.0, MODEL_FPS, 13) == (2,)
     np.testing.assert_array_equal(resampled.trans[23], trans[19])  # 23 / 30 s: 19.17 / 25
     np.testing.assert_allclose(resampled.trans[22], trans[18] + 1 / 3 * (trans[19] - trans[18]))
     blended = resample_motion(slow, MODEL_FPS).trans[23]
     assert 0.05 < blended[0] - trans[19, 0] < 0.5  # without the cut: partly across the jump
+    glitch = SmplMotion(np.zeros(10), pose, trans.copy(), 120.0)
+    glitch.trans[49, 1] += 0.5  # the last frame jumps
+    glitch.trans[5, 1] += 0.5  # and one frame of the first few
+    gamma, at_30 = describe_motion(glitch, _codec())
+    assert at_30.num_frames == 13 and torch.isfinite(gamma).all()
 
 
 # --- GRU regressor ------------------------------------------------------------------------

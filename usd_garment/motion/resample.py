@@ -45,9 +45,11 @@ def resample_motion(motion: SmplMotion, fps: float, cuts: Sequence[int] = ()) ->
     )
 
 
-def resampled_cuts(cuts: Sequence[int], fps: float, to_fps: float) -> tuple[int, ...]:
-    """The frames at ``to_fps`` where the cuts ``cuts`` of a motion at ``fps`` fall after
-    :func:`resample_motion`: the first at or after each cut's time."""
+def resampled_cuts(cuts: Sequence[int], fps: float, to_fps: float, frames: int) -> tuple[int, ...]:
+    """The frames of the ``frames`` at ``to_fps`` where the cuts ``cuts`` of a motion at ``fps``
+    fall after :func:`resample_motion`: the first at or after each cut's time, each once (two
+    cuts between the same two frames are one), none past the last frame."""
     if np.isclose(fps, to_fps):
         return tuple(cuts)
-    return tuple(int(np.ceil(k * to_fps / fps - 1e-6)) for k in cuts)
+    found = {int(np.ceil(k * to_fps / fps - 1e-6)) for k in cuts}
+    return tuple(sorted(k for k in found if 0 < k < frames))

@@ -215,6 +215,6 @@ def describe_motion(
     (``root_cuts``) each on their own."""
     cuts = root_cuts(motion)
     resampled = resample_motion(motion, MODEL_FPS, cuts)
-    cuts = resampled_cuts(cuts, motion.fps, MODEL_FPS)
+    cuts = resampled_cuts(cuts, motion.fps, MODEL_FPS, resampled.num_frames)
     gamma = motion_descriptor(resampled.pose, resampled.trans, codec, MODEL_FPS, padding, cuts)
     return gamma, resampled
