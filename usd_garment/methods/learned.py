@@ -390,6 +390,7 @@ class LearnedMethod:
                     posed = pose_chunk(garment_model, x, parts, art, smooth.sigma > 0)
                     sdf = self._fields.sdf if self.canonical_push else None
                     vertices, unposed = smooth.apply(x, posed, core, sdf, floor)
+                    del posed  # freed before the push (the blended transforms: ~55 MB a chunk)
                     lap("posing")
                     if boxes is not None:  # the whole chunk at once: fewer, larger steps
                         vertices = preimage_push(

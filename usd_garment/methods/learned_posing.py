@@ -30,7 +30,7 @@ from usd_garment.body.lbs import unskin_blended
 from usd_garment.canonical.preimage_push import PartBoxes, preimage_push
 from usd_garment.canonical.push_out import LIPSCHITZ, push_out_canonical
 from usd_garment.fields.body_fields import FieldTangent
-from usd_garment.garment.model import Articulation, GarmentModel, GarmentOutput
+from usd_garment.garment.model import Articulation, GarmentModel
 
 #: Frames posed at once within a chunk (bounds memory: ~N·(3 + 24 + 30) floats per frame).
 POSE_FRAMES = 64
@@ -58,15 +58,21 @@ def pose_chunk(
     skinning (``GarmentOutput.unposed``) and, if asked for, the pieces' blended transforms
     (``GarmentOutput.blended``; else None). Those are left in pieces: a chunk's together would
     take a fresh allocation of about 55 MB, and its page faults cost more than the rest of
-    the posed smoothing's inverse skinning."""
-    out: list[GarmentOutput] = []
+    the posed smoothing's inverse skinning. Each piece's weights ``(p, N, J)`` are dropped as
+    it is posed (27 MB a piece of 64 frames; kept to the chunk's end they put the streamed
+    peak of the T-shirt's version 9 over 1 GB)."""
+    vertices: list[torch.Tensor] = []
+    unposed: list[torch.Tensor] = []
+    pieces: list[torch.Tensor] = []
     for frames, tangent in parts:
         for a in range(frames.start, frames.stop, POSE_FRAMES):
             b = slice(a, min(a + POSE_FRAMES, frames.stop))
-            out.append(garment_model.pose(x[b], art[b], tangent))
-    vertices = torch.cat([o.vertices for o in out])
-    unposed = torch.cat([o.unposed for o in out])
-    return vertices, unposed, [o.blended for o in out] if blended else None
+            out = garment_model.pose(x[b], art[b], tangent)  # its weights dropped here
+            vertices.append(out.vertices)
+            unposed.append(out.unposed)
+            if blended:
+                pieces.append(out.blended)
+    return torch.cat(vertices), torch.cat(unposed), pieces if blended else None
 
 
 #: The Gaussian of :class:`Smoothing` reaches this many standard deviations (scipy's default).
@@ -245,6 +251,7 @@ def _pose_and_push(
             canonical, posed, core, fields.sdf,
             None if floor is None else _tensor(floor),
         )  # fmt: skip
+        del posed  # freed before the push (the blended transforms: ~55 MB a chunk)
         pushed = preimage_push(
             vertices, unposed, art.transforms[core], fields, work.betas, work.boxes,
             work.epsilon,
