@@ -174,3 +174,32 @@ def test_lbs_follows_the_body_under_shape_and_translation(closed_body: BodyModel
     # A zero-offset garment cut from the body follows its vertices exactly (same weights/shape).
     index = torch.cdist(torch.from_numpy(template.vertices), closed_body.v_template).argmin(1)
     np.testing.assert_allclose(points, verts[:, index.numpy()], atol=1e-5)
+
+
+def test_no_acceleration_is_measured_across_a_cut_of_the_motion(
+    closed_body: BodyModel, tmp_path: Path
+) -> None:
+    """A body teleported 0.5 m at frame 4 (a cut, ``root_cuts``): the garment's acceleration
+    is not measured on the two frames whose central difference spans the jump (450 m/s² there
+    at 30 fps, the body's jump), in ``evaluate_garment`` and in ``eval`` of a layer;
+    the other frames are measured as before."""
+    from usd_garment.motion.cuts import root_cuts
+
+    template = torso_template(closed_body)
+    motion = strong_motion(frames=8)
+    motion.trans[4:, 0] += 0.5
+    assert root_cuts(motion) == (4,)
+    source = tmp_path / "body.usda"
+    write_body_layer(source, motion, closed_body)
+    layer = tmp_path / "lbs.usdc"
+    dress(source, layer, method="lbs", template=template)
+    measured, _ = evaluate_layer(layer, source)
+    verts = posed_body_vertices(closed_body, motion)
+    points = get_method("lbs").predict(motion, closed_body, template)
+    faces = closed_body.faces.numpy()
+    across = evaluate_garment(points, verts, faces, motion.fps).acceleration
+    assert across[3:5].min() > 400.0  # the jump: 0.5 m · 30² / s²
+    cut = evaluate_garment(points, verts, faces, motion.fps, cuts=(4,)).acceleration
+    assert np.isnan(cut[[0, 3, 4, 7]]).all()
+    np.testing.assert_array_equal(cut[[1, 2, 5, 6]], across[[1, 2, 5, 6]])
+    np.testing.assert_allclose(measured.acceleration, cut, rtol=1e-5)

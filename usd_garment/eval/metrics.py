@@ -5,6 +5,7 @@ reference, jitter and NaNs."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -38,7 +39,8 @@ class GarmentMetrics:
         reference_unshifted_mm: mean per-vertex distance to the reference with that offset
             taken away (mm): the error in the garment's shape and folds; NaN without one.
         acceleration: mean per-vertex acceleration magnitude (m/s²), central second difference;
-            NaN on the first and last frame.
+            NaN on the first and last frame, and on the two frames whose difference spans a cut
+            of the motion (a teleport of the body is not the garment's acceleration).
         nan_count: vertices with a NaN or infinite coordinate.
         elsewhere_part_counts: ``(J,)`` vertex-frames inside elsewhere over the sequence, by the
             body part of their closest point (the joint that moves its triangle most); None when
@@ -123,12 +125,14 @@ def evaluate_garment(
     reference: np.ndarray | None = None,
     pool: BodyPool | None = None,
     face_parts: np.ndarray | None = None,
+    cuts: Sequence[int] = (),
 ) -> GarmentMetrics:
     """Figures of a garment ``(T, N, 3)`` (m) on the posed body ``(T, V, 3)`` with faces
     ``(F, 3)``, sampled at ``fps``; ``reference`` ``(T, N, 3)`` (m) is optional; ``pool``:
     worker processes that measure blocks of frames (the same figures); ``face_parts`` ``(F,)``:
     the SMPL joint of each body face (:func:`face_joints`), to count where the vertices inside
-    elsewhere are."""
+    elsewhere are; ``cuts``: the frames where the motion starts anew
+    (:func:`~usd_garment.motion.cuts.root_cuts`), around which no acceleration is measured."""
     points = np.asarray(points, dtype=np.float64)
     t_frames, n = points.shape[:2]
     finite = np.isfinite(points).all(axis=-1)  # (T, N)
@@ -153,6 +157,8 @@ def evaluate_garment(
         ok = finite[2:] & finite[1:-1] & finite[:-2]
         norm = np.where(ok, np.linalg.norm(acc, axis=-1), np.nan)
         acceleration[1:-1] = np.nanmean(np.where(ok.any(axis=1)[:, None], norm, 0.0), axis=1)
+        for k in cuts:  # the central differences at k - 1 and at k span the cut
+            acceleration[max(k - 1, 0) : k + 1] = np.nan
     return GarmentMetrics(
         inside_share=n_inside / count,
         inside_forced_share=forced.sum(axis=1) / count,
