@@ -51,7 +51,7 @@ from usd_garment.methods.learned_posing import (
 )
 from usd_garment.motion.cuts import root_cuts
 from usd_garment.motion.sequence import SmplMotion
-from usd_garment.regressor.descriptor import MODEL_FPS, describe_motion
+from usd_garment.regressor.descriptor import MODEL_FPS, at_model_rate, motion_descriptor
 
 #: Where the shipped default model of each garment lives.
 SHIPPED_MODELS = Path(__file__).resolve().parent.parent / "data" / "models"
@@ -122,15 +122,19 @@ def learned_method(name: str, model: str | Path | None = None) -> LearnedMethod:
 @torch.no_grad()
 def predict_latents(model: LearnedModel, motion: SmplMotion) -> torch.Tensor:
     """The regressors' latent codes ``(T, ΣL_m)`` for the frames of ``motion``, the members'
-    side by side: each member's motion descriptor γ at the model's 30 fps (``describe_motion``:
-    the motion resampled, each run between its cuts on its own), its GRU, the codes smoothed in
+    side by side: each member's motion descriptor γ at the model's 30 fps (the motion resampled
+    once, ``at_model_rate``; each run between its cuts on its own), its GRU, the codes smoothed in
     time when the model says so (a Gaussian of ``model.latent_smoothing`` seconds, reflected at
     the ends), then interpolated back to the motion's frames (:func:`to_frames`).
 
     The members' GRUs run in threads: a recurrence is a chain of small matrix products that
     keeps one core busy, so on two cores three members take about half the time."""
     betas = torch.as_tensor(motion.betas, dtype=torch.float32)
-    gammas = [describe_motion(motion, member.pose_codec)[0] for member in model.members]
+    resampled, cuts = at_model_rate(motion)  # once for every member
+    gammas = [
+        motion_descriptor(resampled.pose, resampled.trans, member.pose_codec, cuts=cuts)
+        for member in model.members
+    ]
     with ThreadPoolExecutor(len(model.members)) as pool:
         codes = list(pool.map(lambda m, g: m.regressor.predict(g, betas), model.members, gammas))
     z = torch.cat(codes, dim=1)
