@@ -27,6 +27,7 @@ from usd_garment.garment.library import load_template
 from usd_garment.garment.template import GarmentTemplate
 from usd_garment.methods.learned import predict_latents
 from usd_garment.methods.learned_model import ModelError, load_learned_model, save_learned_model
+from usd_garment.motion.cuts import root_cuts
 from usd_garment.motion.procedural import make_motion
 from usd_garment.usd.body_layer import write_body_layer
 from usd_garment.usd.garment_read import read_garment_layer
@@ -175,6 +176,25 @@ def test_latent_smoothing_is_a_gaussian_over_the_codes_at_30_fps(tmp_path, body,
     np.testing.assert_allclose(z.numpy(), expected, atol=1e-6)
     assert (z.diff(n=2, dim=0).abs().mean() < 0.5 * raw.diff(n=2, dim=0).abs().mean()).item()
     _kept_and_checked(tmp_path, out, info, "latent", -0.5)
+
+
+def test_latent_smoothing_stops_at_the_cuts(tmp_path, body, template):
+    """A motion whose root teleports 0.5 m at frame 20 (a cut, ``root_cuts``): the codes of
+    each side are smoothed on their own, mirrored at the cut as at the ends, so that no frame
+    takes the codes of the other side."""
+    _, out, _ = _smoothed(tmp_path, body, template, "latent", "0.1")
+    smoothed = load_learned_model(out, body)
+    plain = replace(smoothed, latent_smoothing=0.0)
+    motion = make_motion("walk", 40, 30.0, seed=2, body=body)
+    trans = motion.trans.copy()
+    trans[20:, 0] += 0.5
+    jumped = replace(motion, trans=trans)
+    assert root_cuts(jumped) == (20,)
+    z, raw = predict_latents(smoothed, jumped).numpy(), predict_latents(plain, jumped).numpy()
+    runs = [gaussian_filter1d(raw[a:b], 3.0, axis=0, mode="mirror") for a, b in ((0, 20), (20, 40))]
+    np.testing.assert_allclose(z, np.concatenate(runs), atol=1e-6)
+    across = gaussian_filter1d(raw, 3.0, axis=0, mode="mirror")
+    assert np.abs(across - z)[17:23].max() > 10 * np.abs(across - z)[:10].max()
 
 
 def test_posed_smoothing_is_a_gaussian_over_the_posed_frames(tmp_path, body, template):

@@ -23,7 +23,6 @@ from typing import Any
 
 import numpy as np
 import torch
-from scipy.ndimage import gaussian_filter1d
 
 from usd_garment.body.model import BodyModel
 from usd_garment.canonical.preimage_push import PartBoxes, preimage_push
@@ -49,7 +48,7 @@ from usd_garment.methods.learned_posing import (
     can_fork,
     pose_chunk,
 )
-from usd_garment.motion.cuts import root_cuts
+from usd_garment.motion.cuts import root_cuts, smooth_runs
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.regressor.descriptor import MODEL_FPS, at_model_rate, motion_descriptor
 
@@ -125,7 +124,7 @@ def predict_latents(model: LearnedModel, motion: SmplMotion) -> torch.Tensor:
     side by side: each member's motion descriptor γ at the model's 30 fps (the motion resampled
     once, ``at_model_rate``; each run between its cuts on its own), its GRU, the codes smoothed in
     time when the model says so (a Gaussian of ``model.latent_smoothing`` seconds, reflected at
-    the ends), then interpolated back to the motion's frames (:func:`to_frames`).
+    the ends and at each cut), then interpolated back to the motion's frames (:func:`to_frames`).
 
     The members' GRUs run in threads: a recurrence is a chain of small matrix products that
     keeps one core busy, so on two cores three members take about half the time."""
@@ -140,7 +139,7 @@ def predict_latents(model: LearnedModel, motion: SmplMotion) -> torch.Tensor:
     z = torch.cat(codes, dim=1)
     if model.latent_smoothing > 0 and len(z) > 1:
         sigma = model.latent_smoothing * MODEL_FPS
-        smoothed = gaussian_filter1d(z.cpu().numpy(), sigma, axis=0, mode="mirror")
+        smoothed = smooth_runs(z.cpu().numpy(), sigma, cuts, mode="mirror")
         z = torch.from_numpy(smoothed).to(z.device)
     return to_frames(z, motion.fps, motion.num_frames)
 

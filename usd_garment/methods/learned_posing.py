@@ -15,7 +15,6 @@ Units: metres.
 
 from __future__ import annotations
 
-import itertools
 import multiprocessing
 import os
 from collections.abc import Callable, Sequence
@@ -24,13 +23,13 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
-from scipy.ndimage import gaussian_filter1d
 
 from usd_garment.body.lbs import unskin_blended
 from usd_garment.canonical.preimage_push import PartBoxes, preimage_push
 from usd_garment.canonical.push_out import LIPSCHITZ, push_out_canonical
 from usd_garment.fields.body_fields import FieldTangent
 from usd_garment.garment.model import Articulation, GarmentModel
+from usd_garment.motion.cuts import smooth_runs
 
 #: Frames posed at once within a chunk (bounds memory: ~N·(3 + 24 + 30) floats per frame).
 POSE_FRAMES = 64
@@ -107,16 +106,6 @@ class Smoothing:
         them, counted from ``start``."""
         return Smoothing(self.sigma, tuple(k - start for k in self.cuts if start < k < stop))
 
-    def _filter(self, points: np.ndarray) -> np.ndarray:
-        """The Gaussian over the frames of ``points`` ``(t, N, 3)``, each run between cuts on
-        its own."""
-        ends = (0, *self.cuts, len(points))
-        runs = [points[a:b] for a, b in itertools.pairwise(ends)]
-        return np.concatenate([
-            gaussian_filter1d(run, self.sigma, axis=0, mode="nearest", truncate=TRUNCATE)
-            for run in runs
-        ])  # fmt: skip
-
     def apply(
         self,
         x: torch.Tensor,
@@ -144,7 +133,8 @@ class Smoothing:
         if self.sigma <= 0:
             return points[core], before[core]
         assert pieces is not None, "pose_chunk(..., blended=True) for a smoothing"
-        smoothed = torch.from_numpy(self._filter(points.numpy()))
+        smoothed = smooth_runs(points.numpy(), self.sigma, self.cuts, truncate=TRUNCATE)
+        smoothed = torch.from_numpy(smoothed)
         out: list[tuple[torch.Tensor, torch.Tensor]] = []
         start = 0
         for blended in pieces:  # the core's frames piece by piece

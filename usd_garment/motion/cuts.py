@@ -6,7 +6,12 @@ Units: metres, radians, frames per second.
 
 from __future__ import annotations
 
+import itertools
+from collections.abc import Sequence
+from typing import Literal
+
 import numpy as np
+from scipy.ndimage import gaussian_filter1d
 from scipy.spatial.transform import Rotation
 
 from usd_garment.motion.sequence import SmplMotion
@@ -46,3 +51,20 @@ def _outliers(steps: np.ndarray, limit: float) -> np.ndarray:
     before = np.concatenate([change[:1], change])  # step k against step k-1 (k = 0: its next)
     after = np.concatenate([change, change[-1:]])  # step k against step k+1 (the last: before)
     return before & after
+
+
+def smooth_runs(
+    values: np.ndarray,
+    sigma: float,
+    cuts: Sequence[int] = (),
+    mode: Literal["nearest", "mirror"] = "nearest",
+    truncate: float = 4.0,
+) -> np.ndarray:
+    """A Gaussian of ``sigma`` frames over the first axis of ``values`` ``(T, ...)``, each run
+    between ``cuts`` (frames 0 < k < T, increasing) on its own: ``mode`` extends a run beyond
+    its ends (scipy's ``gaussian_filter1d``), never into the run across a cut."""
+    ends = (0, *cuts, len(values))
+    return np.concatenate([
+        gaussian_filter1d(values[a:b], sigma, axis=0, mode=mode, truncate=truncate)
+        for a, b in itertools.pairwise(ends)
+    ])  # fmt: skip
