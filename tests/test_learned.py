@@ -277,6 +277,18 @@ def test_latents_return_to_the_input_frames() -> None:
     np.testing.assert_allclose(to_frames(values[:1], 24.0, 3)[:, 0].numpy(), [0, 0, 0])
 
 
+def test_latents_return_to_the_input_frames_on_their_side_of_a_cut() -> None:
+    """A cut at frame 6 of a motion at 120 fps (0.05 s) falls at the model's frame 2 (1/15 s):
+    the input frames 4 and 5, before the cut, take the model's frame 1, and 6 and 7 its frame
+    2, where without the cut they blend the two sides."""
+    values = torch.arange(5, dtype=torch.float32)[:, None]  # at 30 fps
+    blended = [0, 0.25, 0.5, 0.75, 1, 1.25, 1.5, 1.75, 2, 2.25]
+    np.testing.assert_allclose(to_frames(values, 120.0, 10)[:, 0].numpy(), blended)
+    cut = to_frames(values, 120.0, 10, cuts=(6,))
+    np.testing.assert_allclose(cut[:, 0].numpy(), [0, 0.25, 0.5, 0.75, 1, 1, 2, 2, 2, 2.25])
+    np.testing.assert_allclose(to_frames(values, 30.0, 5, cuts=(2,))[:, 0].numpy(), range(5))
+
+
 def test_the_fields_tangent_is_kept_across_chunks_while_it_is_the_cheaper() -> None:
     fields = load_body_fields()
     x = torch.as_tensor(load_template("tshirt", "low").vertices).expand(8, -1, -1)

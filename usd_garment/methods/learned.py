@@ -14,7 +14,7 @@ from __future__ import annotations
 import json
 import time
 from collections import deque
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import closing, contextmanager, nullcontext
 from dataclasses import dataclass
@@ -49,6 +49,7 @@ from usd_garment.methods.learned_posing import (
     pose_chunk,
 )
 from usd_garment.motion.cuts import root_cuts, smooth_runs
+from usd_garment.motion.resample import cut_at
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.regressor.descriptor import MODEL_FPS, at_model_rate, motion_descriptor
 
@@ -129,9 +130,10 @@ def predict_latents(model: LearnedModel, motion: SmplMotion) -> torch.Tensor:
     The members' GRUs run in threads: a recurrence is a chain of small matrix products that
     keeps one core busy, so on two cores three members take about half the time."""
     betas = torch.as_tensor(motion.betas, dtype=torch.float32)
-    resampled, cuts = at_model_rate(motion)  # once for every member
+    cuts = root_cuts(motion)
+    resampled, at_30 = at_model_rate(motion, cuts)  # once for every member
     gammas = [
-        motion_descriptor(resampled.pose, resampled.trans, member.pose_codec, cuts=cuts)
+        motion_descriptor(resampled.pose, resampled.trans, member.pose_codec, cuts=at_30)
         for member in model.members
     ]
     with ThreadPoolExecutor(len(model.members)) as pool:
@@ -139,20 +141,29 @@ def predict_latents(model: LearnedModel, motion: SmplMotion) -> torch.Tensor:
     z = torch.cat(codes, dim=1)
     if model.latent_smoothing > 0 and len(z) > 1:
         sigma = model.latent_smoothing * MODEL_FPS
-        smoothed = smooth_runs(z.cpu().numpy(), sigma, cuts, mode="mirror")
+        smoothed = smooth_runs(z.cpu().numpy(), sigma, at_30, mode="mirror")
         z = torch.from_numpy(smoothed).to(z.device)
-    return to_frames(z, motion.fps, motion.num_frames)
+    return to_frames(z, motion.fps, motion.num_frames, cuts)
 
 
-def to_frames(values: torch.Tensor, fps: float, count: int) -> torch.Tensor:
+def to_frames(
+    values: torch.Tensor, fps: float, count: int, cuts: Sequence[int] = ()
+) -> torch.Tensor:
     """``values`` ``(T', ...)`` sampled at :data:`MODEL_FPS` from time 0, linearly interpolated
-    at ``count`` frames sampled at ``fps`` from time 0 (clamped at the last sample)."""
+    at ``count`` frames sampled at ``fps`` from time 0 (clamped at the last sample). ``cuts``:
+    the frames (at ``fps``) where the motion starts anew; a frame between the two samples
+    around a cut's sample (``cut_at``) takes the one on its own side of the cut, not a blend."""
     if values.shape[0] == 1:
         return values.expand(count, *values.shape[1:])
     u = torch.arange(count, dtype=torch.float64) * (MODEL_FPS / fps)
     u = u.clamp(max=values.shape[0] - 1)
     i0 = u.floor().long().clamp(max=values.shape[0] - 2)
-    alpha = (u - i0).to(values.dtype).reshape(-1, *([1] * (values.dim() - 1)))
+    alpha = u - i0
+    frames = torch.arange(count)
+    for cut in sorted(cuts, reverse=True):  # of two cuts at one sample, the first decides
+        across = i0 + 1 == cut_at(cut, fps, MODEL_FPS)
+        alpha[across] = (frames[across] >= cut).to(alpha.dtype)
+    alpha = alpha.to(values.dtype).reshape(-1, *([1] * (values.dim() - 1)))
     return (1.0 - alpha) * values[i0] + alpha * values[i0 + 1]
 
 

@@ -51,5 +51,11 @@ def resampled_cuts(cuts: Sequence[int], fps: float, to_fps: float, frames: int) 
     cuts between the same two frames are one), none past the last frame."""
     if np.isclose(fps, to_fps):
         return tuple(cuts)
-    found = {int(np.ceil(k * to_fps / fps - 1e-6)) for k in cuts}
+    found = {cut_at(k, fps, to_fps) for k in cuts}
     return tuple(sorted(k for k in found if 0 < k < frames))
+
+
+def cut_at(cut: int, fps: float, to_fps: float) -> int:
+    """The frame at ``to_fps`` where the cut at frame ``cut`` of a motion at ``fps`` falls: the
+    first at or after the cut's time (it may lie past the last frame)."""
+    return int(np.ceil(cut * to_fps / fps - 1e-6))

@@ -207,10 +207,9 @@ def motion_descriptor(
     return torch.cat([code.to(torch.float64), code_vel, code_acc, root], dim=-1).float()
 
 
-def at_model_rate(motion: SmplMotion) -> tuple[SmplMotion, tuple[int, ...]]:
+def at_model_rate(motion: SmplMotion, cuts: Sequence[int]) -> tuple[SmplMotion, tuple[int, ...]]:
     """``motion`` resampled to :data:`MODEL_FPS` (``motion`` itself when it already runs at that
-    rate), and its cuts (``root_cuts``) at that rate."""
-    cuts = root_cuts(motion)
+    rate), and its ``cuts`` (its frames where it starts anew, ``root_cuts``) at that rate."""
     resampled = resample_motion(motion, MODEL_FPS, cuts)
     return resampled, resampled_cuts(cuts, motion.fps, MODEL_FPS, resampled.num_frames)
 
@@ -220,6 +219,6 @@ def describe_motion(
 ) -> tuple[torch.Tensor, SmplMotion]:
     """γ ``(T', 42)`` of ``motion`` resampled to :data:`MODEL_FPS`, and that resampled motion
     (:func:`at_model_rate`); the runs between its cuts each on their own."""
-    resampled, cuts = at_model_rate(motion)
+    resampled, cuts = at_model_rate(motion, root_cuts(motion))
     gamma = motion_descriptor(resampled.pose, resampled.trans, codec, MODEL_FPS, padding, cuts)
     return gamma, resampled
