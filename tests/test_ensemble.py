@@ -25,12 +25,19 @@ from usd_garment.body.model import BodyModel
 from usd_garment.cli.main import main
 from usd_garment.garment.library import load_template
 from usd_garment.garment.template import GarmentTemplate
-from usd_garment.methods.learned import predict_latents
+from usd_garment.methods.learned import LearnedMethod, predict_latents
 from usd_garment.methods.learned_model import ModelError, load_learned_model, save_learned_model
 from usd_garment.motion.cuts import root_cuts
 from usd_garment.motion.procedural import make_motion
+from usd_garment.motion.sequence import SmplMotion
 from usd_garment.usd.body_layer import write_body_layer
 from usd_garment.usd.garment_read import read_garment_layer
+
+
+class SmoothedAlone(LearnedMethod):
+    """The networks with the model's posed smoothing and no push: the smoothing alone."""
+
+    smooths = True
 
 
 @pytest.fixture(scope="module")
@@ -197,6 +204,24 @@ def test_latent_smoothing_stops_at_the_cuts(tmp_path, body, template):
     assert np.abs(across - z)[17:23].max() > 10 * np.abs(across - z)[:10].max()
 
 
+def test_the_frames_before_a_cut_are_the_garment_of_the_clip_before_it(tmp_path, body, template):
+    """A walk, then an arm swing 1 m away with no transition (a cut, at 120 fps between two of
+    the model's frames), dressed by a model with both smoothings: the frames before the cut are
+    the walk's dressed alone (its motion described, its codes smoothed and brought back to the
+    input's frames, its posed garment smoothed, each on its own)."""
+    _, out, _ = _smoothed(tmp_path, body, template, "latent", "0.1")
+    save_learned_model(tmp_path / "both", replace(load_learned_model(out), posed_smoothing=0.05))
+    walk = make_motion("walk", 22, 120.0, seed=2, body=body)
+    swing = make_motion("arm_swing", 20, 120.0, seed=3, body=body)
+    pose = np.concatenate([walk.pose, swing.pose])
+    trans = np.concatenate([walk.trans, swing.trans + np.array([1.0, 0.0, 0.0])])
+    joined = SmplMotion(walk.betas, pose, trans, 120.0, model=walk.model)
+    assert root_cuts(joined) == (22,)
+    method = SmoothedAlone(tmp_path / "both", exact_fields=True)
+    before = method.predict(joined, body, template)[:22]
+    np.testing.assert_allclose(before, method.predict(walk, body, template), atol=1e-5)
+
+
 def test_posed_smoothing_is_a_gaussian_over_the_posed_frames(tmp_path, body, template):
     """``train combine --posed-smoothing S``: the posed garment is smoothed by a Gaussian of S
     seconds at the input's frame rate, the nearest frame repeated at the ends, and a motion
@@ -205,11 +230,6 @@ def test_posed_smoothing_is_a_gaussian_over_the_posed_frames(tmp_path, body, tem
     networks alone (``learned``) are not smoothed: nothing would keep the smoothed vertices out
     of their own body parts (``LearnedMethod.smooths``); the smoothing alone is checked here
     through a method that smooths with no push at all."""
-    from usd_garment.methods.learned import LearnedMethod
-
-    class SmoothedAlone(LearnedMethod):
-        smooths = True
-
     (first, second), out, info = _smoothed(tmp_path, body, template, "posed", "0.05")
     assert info["latent_smoothing_s"] == 0.0
     plain_dir = tmp_path / "plain"
