@@ -116,7 +116,7 @@ QUALITY_LODS = {"draft": "low", "final": "high"}
     "start, 1.4x faster with 2 workers on a 2-core machine. learned+preimage (the default): "
     "each chunk of 256 frames posed and pushed while this process decodes the next, at most "
     "one worker for every two chunks (on 2 cores with 2 workers: 1.1-1.3x on a 4,000-frame "
-    "shot, 1.04x on 1,000 frames; docs/learning.md).",
+    "shot, 1.04-1.23x on 1,000 frames, about twice the memory; docs/learning.md).",
 )
 @json_option()
 def dress(
