@@ -120,17 +120,20 @@ def learned_method(name: str, model: str | Path | None = None) -> LearnedMethod:
 
 
 @torch.no_grad()
-def predict_latents(model: LearnedModel, motion: SmplMotion) -> torch.Tensor:
+def predict_latents(
+    model: LearnedModel, motion: SmplMotion, cuts: Sequence[int] | None = None
+) -> torch.Tensor:
     """The regressors' latent codes ``(T, ΣL_m)`` for the frames of ``motion``, the members'
     side by side: each member's motion descriptor γ at the model's 30 fps (the motion resampled
     once, ``at_model_rate``; each run between its cuts on its own), its GRU, the codes smoothed in
     time when the model says so (a Gaussian of ``model.latent_smoothing`` seconds, reflected at
     the ends and at each cut), then interpolated back to the motion's frames (:func:`to_frames`).
+    ``cuts``: the motion's :func:`root_cuts`, where the caller has them (None: found here).
 
     The members' GRUs run in threads: a recurrence is a chain of small matrix products that
     keeps one core busy, so on two cores three members take about half the time."""
     betas = torch.as_tensor(motion.betas, dtype=torch.float32)
-    cuts = root_cuts(motion)
+    cuts = root_cuts(motion) if cuts is None else cuts
     resampled, at_30 = at_model_rate(motion, cuts)  # once for every member
     gammas = [
         motion_descriptor(resampled.pose, resampled.trans, member.pose_codec, cuts=at_30)
@@ -355,9 +358,9 @@ class LearnedMethod:
         t_frames = motion.num_frames
         tangents: list[Tangent] = []  # the last one is kept across chunks (_tangents)
         lap("load")
-        z = predict_latents(model, motion)
-        seconds = self.posed_smoothing(model)
-        smoothing = Smoothing.of(seconds, motion.fps, root_cuts(motion) if seconds > 0 else ())
+        cuts = root_cuts(motion)  # the regressor's and the smoothing's
+        z = predict_latents(model, motion, cuts)
+        smoothing = Smoothing.of(self.posed_smoothing(model), motion.fps, cuts)
         lap("regressor")
         posing = self._posing_pool(garment_model, betas, boxes, -(-t_frames // chunk))
         pending: deque[Future[np.ndarray]] = deque()  # the chunks the workers have, in order
