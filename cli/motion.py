@@ -3,7 +3,9 @@ poses of many motions into a pose corpus."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any, TypeVar
 
 import click
 import numpy as np
@@ -15,7 +17,12 @@ from usd_garment.cli.options import (
     body_model_option,
     collars_option,
 )
-from usd_garment.motion.pose_corpus import CORPUS_FPS, build_pose_corpus, save_pose_corpus
+from usd_garment.motion.pose_corpus import (
+    CORPUS_FPS,
+    PoseCorpus,
+    build_pose_corpus,
+    save_pose_corpus,
+)
 from usd_garment.motion.procedural import (
     ARM_CLEARANCE,
     MOTION_KINDS,
@@ -25,6 +32,7 @@ from usd_garment.motion.procedural import (
 from usd_garment.usd.body_layer import write_body_layer
 
 USD_SUFFIXES = (".usd", ".usda", ".usdc")
+F = TypeVar("F", bound=Callable[..., Any])
 
 
 @click.group()
@@ -99,23 +107,49 @@ def make(
     click.echo(f"wrote {output}: {kind}, {result.num_frames} frames at {result.fps:g} fps")
 
 
+def corpus_options(command: F) -> F:
+    """The options of reading motions' poses (``motion poses``, ``train pose-error``): the
+    sampling rate, the BVH shoulders and collars, the body model."""
+    for option in reversed((
+        click.option("--fps", type=click.FloatRange(min=0, min_open=True), default=CORPUS_FPS,
+                     show_default=True, help="Rate each motion is sampled at."),
+        click.option("--arm-clearance", type=click.FloatRange(min=0), default=0.0,
+                     show_default=True, help="BVH captures: open the shoulders where an arm "
+                     "comes closer than this (m) to the torso, as import-bvh does (0: the arms "
+                     "as captured; opening them is slow)."),
+        collars_option("BVH captures: the collars as import-bvh --collars retargets them."),
+        body_model_option,
+    )):  # fmt: skip
+        command = option(command)
+    return command
+
+
+def read_corpus(
+    sources: tuple[Path, ...],
+    fps: float,
+    arm_clearance: float,
+    collars: str,
+    body_model: Path | None,
+) -> PoseCorpus:
+    """The poses of SOURCES as :func:`build_pose_corpus` reads them, with a progress bar;
+    ``FileNotFoundError`` names the first source missing."""
+    missing = [str(p) for p in sources if not p.is_file()]
+    if missing:
+        raise FileNotFoundError(f"{missing[0]}: no such file")
+    body = load_body_model(body_model)
+    with click.progressbar(length=len(sources), label="reading motions") as bar:
+        return build_pose_corpus(
+            sources, body, fps, arm_clearance or None, collars, progress=lambda _: bar.update(1)
+        )
+
+
 @motion.command("poses")
 @click.argument("sources", nargs=-1, required=True, type=click.Path(dir_okay=False, path_type=Path))
 @click.option(
     "-o", "--output", type=click.Path(dir_okay=False, path_type=Path), required=True,
     help="Pose corpus to write (.npz).",
 )  # fmt: skip
-@click.option(
-    "--fps", type=click.FloatRange(min=0, min_open=True), default=CORPUS_FPS, show_default=True,
-    help="Rate each motion is sampled at.",
-)  # fmt: skip
-@click.option(
-    "--arm-clearance", type=click.FloatRange(min=0), default=0.0, show_default=True,
-    help="BVH captures: open the shoulders where an arm comes closer than this (m) to the "
-    "torso, as import-bvh does (0: the arms as captured; opening them is slow).",
-)  # fmt: skip
-@collars_option("BVH captures: the collars as import-bvh --collars retargets them.")
-@body_model_option
+@corpus_options
 def poses(
     sources: tuple[Path, ...],
     output: Path,
@@ -130,15 +164,7 @@ def poses(
     if output.suffix.lower() != ".npz":
         raise click.BadParameter("the output must end in .npz", param_hint="-o")
     with user_errors():
-        missing = [str(p) for p in sources if not p.is_file()]
-        if missing:
-            raise FileNotFoundError(f"{missing[0]}: no such file")
-        body = load_body_model(body_model)
-        with click.progressbar(length=len(sources), label="reading motions") as bar:
-            corpus = build_pose_corpus(
-                sources, body, fps, arm_clearance or None, collars,
-                progress=lambda _: bar.update(1),
-            )  # fmt: skip
+        corpus = read_corpus(sources, fps, arm_clearance, collars, body_model)
         save_pose_corpus(output, corpus)
     click.echo(
         f"wrote {output}: {len(corpus.poses)} poses of {len(corpus.sources)} motions at {fps:g} fps"
