@@ -11,9 +11,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
 import click
+import numpy as np
 from tqdm import tqdm
 
 from usd_garment.cli.errors import user_errors
+from usd_garment.cli.motion import corpus_options, read_corpus
 
 if TYPE_CHECKING:
     from usd_garment.body.model import BodyModel
@@ -378,3 +380,41 @@ def member(model: Path, index: int, out: Path) -> None:
         save_learned_model(out, one)
         records = copy_member_record(model, index, out)
     click.echo(f"wrote the model {out}: member {index} of {model}, {records} curves and logs")
+
+
+@train.command("pose-error", short_help="How well a trained pose code holds the poses of motions.")
+@click.argument("model", type=click.Path(file_okay=False, path_type=Path))
+@click.argument("sources", nargs=-1, required=True, type=click.Path(dir_okay=False, path_type=Path))
+@corpus_options
+def pose_error(
+    model: Path,
+    sources: tuple[Path, ...],
+    fps: float,
+    arm_clearance: float,
+    collars: str,
+    body_model: Path | None,
+) -> None:
+    """The pose code of MODEL (a run folder's pose stage, else each member of a model
+    directory) on the poses of SOURCES (BVH captures, AMASS .npz, USD body layers, read as
+    'motion poses' reads them): the mean geodesic angle between each joint's rotation (1..23)
+    and its reconstruction, in degrees, per motion and over all their poses. The networks read
+    the pose through this code, so a pose it holds badly is one they cannot tell apart
+    (docs/learning.md, "Real captures against the pose code")."""
+    with user_errors():
+        from usd_garment.training.pipeline import trained_pose_codecs
+        from usd_garment.training.pose import corpus_errors
+
+        codecs = trained_pose_codecs(model)
+        corpus = read_corpus(sources, fps, arm_clearance, collars, body_model)
+        errors = np.array([corpus_errors(codec, corpus) for codec in codecs])  # (C, S)
+    counts = np.asarray(corpus.counts)
+    names = [f"{name} ({count} poses)" for name, count in zip(corpus.sources, counts, strict=True)]
+    names.append(f"all ({counts.sum()} poses)")
+    rows = np.concatenate([errors, errors @ counts[:, None] / counts.sum()], axis=1).T  # (S+1, C)
+    width = max(map(len, names))
+    members = " ".join(f"{f'code {i}':>8}" for i in range(len(codecs)))
+    click.echo(f"{model}: mean error per joint (deg) of {len(codecs)} pose code(s), "
+               f"{codecs[0].code_size}-d")  # fmt: skip
+    click.echo(f"{'':<{width}} {members}")
+    for name, row in zip(names, rows, strict=True):
+        click.echo(f"{name:<{width}} " + " ".join(f"{value:8.2f}" for value in row))

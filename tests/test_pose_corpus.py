@@ -15,9 +15,11 @@ from tests.test_learned import TINY, tiny_canonical_set
 from usd_garment.body.model import BodyModel
 from usd_garment.cli.main import main
 from usd_garment.motion.motion_file import read_motion_file
-from usd_garment.motion.pose_corpus import load_pose_corpus
+from usd_garment.motion.pose_corpus import build_pose_corpus, load_pose_corpus
 from usd_garment.motion.procedural import make_motion
 from usd_garment.motion.resample import resample_motion
+from usd_garment.training.pipeline import load_stage
+from usd_garment.training.pose import evaluate_pose_codec
 from usd_garment.usd.body_layer import write_body_layer
 
 CMU_CLIP = Path("/work/shared/mocap/cmu_131_01.bvh")
@@ -95,6 +97,24 @@ def test_pose_codec_trains_on_the_corpus_too(
     history = json.loads((model / "pose.json").read_text())["history"]
     assert history["corpus_poses"] == 10 and history["config"]["corpus"] == str(corpus)
     assert history["train_poses"] + history["validation_poses"] == 20 + 10
+
+    # train pose-error: the run folder's pose code on each motion and on all, as evaluated
+    sway, still = amass_npz(tmp_path / "a.npz", 60), amass_npz(tmp_path / "b.npz", 12, 30.0)
+    result = CliRunner().invoke(main, ["train", "pose-error", str(model), str(sway), str(still)])
+    assert result.exit_code == 0, result.output
+    codec = load_stage(model, "pose")[0]
+    each = [evaluate_pose_codec(codec, build_pose_corpus([path], body_model).poses)["angle_deg"]
+            for path in (sway, still)]  # fmt: skip
+    rows = {line.split(" (")[0]: float(line.split()[-1]) for line in result.output.splitlines()
+            if "poses)" in line}  # fmt: skip
+    assert rows["a.npz"] == pytest.approx(each[0], abs=0.006)
+    assert rows["b.npz"] == pytest.approx(each[1], abs=0.006)
+    assert rows["all"] == pytest.approx((10 * each[0] + 4 * each[1]) / 14, abs=0.006)
+    assert "1 pose code(s), 10-d" in result.output
+    result = CliRunner().invoke(main, ["train", "pose-error", str(tmp_path), str(sway)])
+    assert result.exit_code == 1 and len(result.output.strip().splitlines()) == 1
+    result = CliRunner().invoke(main, ["train", "pose-error", str(model), str(tmp_path / "x.bvh")])
+    assert result.exit_code == 1 and "x.bvh: no such file" in result.output
     config.write_text(json.dumps({"pose": {**TINY["pose"], "corpus": str(tmp_path / "no.npz")}}))
     result = CliRunner().invoke(main, ["train", "pose", "--data", str(data), "--out",
                                        str(tmp_path / "m2"), "--config", str(config)])  # fmt: skip

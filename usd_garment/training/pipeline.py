@@ -33,6 +33,7 @@ from usd_garment.methods.learned_model import (
     PARTS,
     LearnedModel,
     Member,
+    load_learned_model,
     save_learned_model,
 )
 from usd_garment.motion.pose_corpus import load_pose_corpus
@@ -145,6 +146,20 @@ def load_stage(folder: str | Path, stage: str) -> tuple[torch.nn.Module, dict[st
     net = PARTS[STAGE_PART[stage]].from_config(record["architecture"])
     net.load_state_dict(torch.load(weights, map_location="cpu", weights_only=True))
     return net.eval(), record
+
+
+def trained_pose_codecs(folder: str | Path) -> list[PoseCodec]:
+    """The pose codes of a run folder (its trained pose stage) or, where it has none, of a
+    model directory (each member's, in order).
+
+    Raises:
+        ModelError: neither (see :func:`load_learned_model`).
+    """
+    if _stage_file(Path(folder), "pose").is_file():
+        codec = load_stage(folder, "pose")[0]
+        assert isinstance(codec, PoseCodec)
+        return [codec]
+    return [member.pose_codec for member in load_learned_model(folder).members]
 
 
 def _log(folder: Path, stage: str) -> Callable[[int, int, dict[str, Any]], None]:

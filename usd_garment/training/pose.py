@@ -6,6 +6,7 @@ checkpoints and resume."""
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from collections.abc import Callable
@@ -17,6 +18,7 @@ import numpy as np
 import torch
 
 from usd_garment.body.joints import NUM_JOINTS, SMPL_PARENTS
+from usd_garment.motion.pose_corpus import PoseCorpus
 from usd_garment.regressor.pose_code import PoseCodec, features_to_rotations, pose_to_features
 from usd_garment.training.checkpoint import resume_checkpoint, save_checkpoint
 from usd_garment.training.finite import require_finite
@@ -133,6 +135,17 @@ def evaluate_pose_codec(codec: PoseCodec, poses: torch.Tensor | np.ndarray) -> d
         count += chunk.shape[0]
     count = max(count, 1)
     return {"feature_mse": sq / count, "angle_deg": angle / count}
+
+
+def corpus_errors(codec: PoseCodec, corpus: PoseCorpus) -> list[float]:
+    """The mean geodesic angle (degrees) between each joint's rotation (1..23) and its
+    reconstruction by ``codec`` (:func:`evaluate_pose_codec`) on each motion of ``corpus``, in
+    the order of its sources."""
+    bounds = np.cumsum([0, *corpus.counts])
+    return [
+        evaluate_pose_codec(codec, corpus.poses[a:b])["angle_deg"]
+        for a, b in itertools.pairwise(bounds)
+    ]
 
 
 def train_pose_codec(
