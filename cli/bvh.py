@@ -44,7 +44,12 @@ from usd_garment.usd.garment_layer import check_outputs
     "--floor", type=click.Choice(FLOOR_MODES), default="body", show_default=True,
     help="body: move the clip so the body stands on y=0; capture: keep the capture's heights.",
 )  # fmt: skip
-@click.option("--frames", default=None, help="Frames A:B of the file (B exclusive).")
+@click.option(
+    "--frames",
+    default=None,
+    help="Frames A:B of the file (B exclusive). Default: all, less frame 0 where it is a "
+    "reference pose that the motion leaves at once (the T-pose of CMU's BVH conversions).",
+)
 @click.option(
     "--arm-clearance", type=click.FloatRange(min=0), default=ARM_CONTACT_CLEARANCE,
     show_default=True,
@@ -114,6 +119,7 @@ def import_bvh(
             "arm_clearance_m": info.arm_clearance_m,
             "collars": collars,
             "shoulder_opening": info.opening_summary(),
+            "reference_left_out": info.reference_left_out,
             "joint_map": info.joint_map,
             "drivers": {k: v for k, v in info.drivers.items() if v != info.joint_map[k]},
             "unmapped": info.unmapped,
@@ -128,6 +134,10 @@ def import_bvh(
         opened = (
             f"; shoulders opened up to {summary['max_deg']:.1f}° (mean {summary['mean_deg']:.1f}°, "
             f"{summary['frames']} frames) to keep {1000 * info.arm_clearance_m:g} mm clear"
+        )
+    if info.reference_left_out:
+        opened += (
+            "; frame 0 left out: a reference pose the motion leaves at once (--frames keeps it)"
         )
     unit = f"{info.units}{' (detected)' if info.units_detected else ''}"
     click.echo(

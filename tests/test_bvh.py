@@ -30,6 +30,7 @@ from usd_garment.motion.bvh import (
     bone_angle_errors,
     forward_kinematics,
     is_bvh_path,
+    leads_with_reference,
     load_bvh,
     map_joints,
     parse_bvh,
@@ -38,11 +39,13 @@ from usd_garment.motion.bvh import (
     up_rotation,
     world_motion,
 )
+from usd_garment.motion.capture_clip import read_text
 from usd_garment.motion.procedural import arm_clearance, arm_inside
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.usd.read import read_smpl_motion
 
 CMU_CLIP = Path("/work/shared/mocap/cmu_131_01.bvh")
+EXAMPLES_MOCAP = Path(__file__).parents[1] / "examples" / "mocap"
 J = {name: i for i, name in enumerate(SMPL_JOINT_NAMES)}
 
 
@@ -448,6 +451,44 @@ def test_real_cmu_clip_through_the_cli(body_model: BodyModel, tmp_path: Path) ->
                                        "0:8", "--json", "--no-mesh"])  # fmt: skip
     assert result.exit_code == 0, result.output
     assert '"frames": 8' in result.stdout and '"left_collar": "LeftCollar"' in result.stdout
+
+
+def head_of(source: Path, frames: int, out: Path, first: int = 0) -> Path:
+    """The BVH file ``out``: ``source``'s frames ``first`` to ``first + frames`` (exclusive)."""
+    header, motion = read_text(source, "BVH").split("MOTION")
+    lines = motion.strip().splitlines()  # "Frames: N", "Frame Time: t", then the frames
+    rows = lines[2 + first : 2 + first + frames]
+    return write(out, f"{header}MOTION\nFrames: {frames}\n{lines[1]}\n" + "\n".join(rows) + "\n")
+
+
+def test_a_reference_pose_in_frame_0_is_left_out(body_model: BodyModel, tmp_path: Path) -> None:
+    """CMU's BVH conversions add a T-pose as frame 0, from which the motion's first frame turns
+    joints by 60-180 degrees (played at 30 fps it throws the cloth off the body, stop 81): the
+    import leaves it out unless ``--frames`` keeps it; captures without one lose nothing."""
+    clip = head_of(EXAMPLES_MOCAP / "cmu_13_39.bvh.xz", 12, tmp_path / "jump.bvh")
+    parsed = read_bvh(clip)
+    assert leads_with_reference(parsed)
+    motion, info = retarget(parsed, body_model, arm_clearance=None)
+    assert info.reference_left_out and motion.num_frames == 11
+    without, _ = retarget(parsed, body_model, arm_clearance=None, frames=(1, 12))
+    np.testing.assert_array_equal(motion.pose, without.pose)
+    np.testing.assert_array_equal(motion.trans, without.trans)
+    kept, kept_info = retarget(parsed, body_model, arm_clearance=None, frames=(0, 12))
+    assert kept.num_frames == 12 and not kept_info.reference_left_out
+    # the motion itself (frames 1 on) and a capture without a reference keep every frame
+    rest = read_bvh(head_of(EXAMPLES_MOCAP / "cmu_13_39.bvh.xz", 11, tmp_path / "r.bvh", 1))
+    assert not leads_with_reference(rest) and not leads_with_reference(read_bvh(CMU_CLIP))
+    assert retarget(rest, body_model, arm_clearance=None)[0].num_frames == 11
+
+    out = tmp_path / "jump.usda"
+    result = CliRunner().invoke(main, ["import-bvh", str(clip), "-o", str(out), "--no-mesh"])
+    assert result.exit_code == 0, result.output
+    assert "11 frames at 120 fps" in result.stdout and "frame 0 left out" in result.stdout
+    result = CliRunner().invoke(main, ["import-bvh", str(clip), "-o", str(out), "--no-mesh",
+                                       "--frames", "0:12", "--json"])  # fmt: skip
+    assert result.exit_code == 0, result.output
+    summary = json.loads(result.stdout)
+    assert summary["frames"] == 12 and summary["reference_left_out"] is False
 
 
 def swinging_arms(frames: int = 45, fps: float = 30.0) -> BvhClip:

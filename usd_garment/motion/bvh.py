@@ -136,6 +136,14 @@ COLLAR_MODES: tuple[str, ...] = ("aimed", "rest")
 #: The collar mode of every reader and command that is not told one.
 DEFAULT_COLLARS = "rest"
 
+#: Frame 0 of a capture is a reference pose, not a frame of the motion (the CMU conversions'
+#: added T-pose), where some joint turns more than this (rad) from it into frame 1, and more than
+#: :data:`REFERENCE_RATIO` times any joint's turn from frame 1 to 2. The CMU BVH conversions here
+#: turn a joint 59-180 degrees there; their next step, and the first step of every capture
+#: without a reference pose, at most 28 degrees (120 fps; stop 81).
+REFERENCE_JUMP = math.radians(45.0)
+REFERENCE_RATIO = 2.0
+
 _CHANNEL = re.compile(r"^([xyz])(position|rotation)$", re.IGNORECASE)
 _FLOAT = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 
@@ -164,6 +172,7 @@ class BvhRetarget:
         arm_clearance_m: the clearance the shoulders were opened to keep (None: off).
         shoulder_opening: ``(T, 2)`` rad, how far each shoulder (left, right) was opened per
             frame of the motion (zeros when off).
+        reference_left_out: frame 0 was left out as a reference pose (:func:`leads_with_reference`).
     """
 
     joint_map: dict[str, str]
@@ -182,6 +191,7 @@ class BvhRetarget:
     rest_corrections: np.ndarray
     arm_clearance_m: float | None = None
     shoulder_opening: np.ndarray | None = None
+    reference_left_out: bool = False
 
     def opening_summary(self, threshold_deg: float = 0.1) -> dict[str, float | int]:
         """Shoulder opening in degrees over both sides: ``mean``, ``max``, and ``frames`` (how
@@ -801,7 +811,8 @@ def retarget(
         scale: metres per file unit; overrides ``units``.
         up_axis: ``"y"``, ``"z"`` or ``"auto"`` (the rest skeleton's hips→head axis).
         floor: ``"body"`` or ``"capture"`` (:data:`FLOOR_MODES`).
-        frames: frames ``(A, B)`` of the file to keep (B exclusive); all by default.
+        frames: frames ``(A, B)`` of the file to keep (B exclusive); by default all, less frame
+            0 where it is a reference pose (:func:`leads_with_reference`).
         arm_clearance: open the shoulders wherever an arm comes closer than this (m) to the
             torso (:func:`~usd_garment.motion.procedural.open_shoulders`, measured at most
             :data:`ARM_CHECK_FPS` times a second); 0 or None: bone directions as captured.
@@ -824,6 +835,9 @@ def retarget(
         raise BvhError(f"unknown floor mode '{floor}' (expected {', '.join(FLOOR_MODES)})")
     if up_axis not in UP_AXES:
         raise BvhError(f"unknown up axis '{up_axis}' (expected {', '.join(UP_AXES)})")
+    reference = frames is None and leads_with_reference(clip)
+    if reference:
+        frames = (1, clip.num_frames)
     if frames is not None:
         a, b = frames
         if not 0 <= a < b <= clip.num_frames:
@@ -910,8 +924,24 @@ def retarget(
         rest_corrections=plan.corrections,
         arm_clearance_m=float(arm_clearance) if arm_clearance else None,
         shoulder_opening=opening,
+        reference_left_out=reference,
     )
     return motion, info
+
+
+def leads_with_reference(clip: BvhClip) -> bool:
+    """Whether the clip's frame 0 is a reference pose rather than a frame of the motion: some
+    joint's world rotation turns more than :data:`REFERENCE_JUMP` from frame 0 to frame 1, and
+    more than :data:`REFERENCE_RATIO` times the largest turn from frame 1 to frame 2 (a clip of
+    fewer than three frames has none)."""
+    if clip.num_frames < 3:
+        return False
+    rotations, _ = forward_kinematics(clip, slice(0, 3))  # (3, J, 3, 3)
+    turns = [
+        np.linalg.norm(Rotation.from_matrix(np.swapaxes(a, 1, 2) @ b).as_rotvec(), axis=-1).max()
+        for a, b in pairwise(rotations)
+    ]  # the largest joint turn (rad) from frame 0 to 1, and from 1 to 2
+    return bool(turns[0] > REFERENCE_JUMP and turns[0] > REFERENCE_RATIO * turns[1])
 
 
 def _named(skeleton: BvhSkeleton, joints: Sequence[int | None]) -> dict[str, str]:
