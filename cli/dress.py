@@ -64,6 +64,17 @@ QUALITY_LODS = {"draft": "low", "final": "high"}
 @skeleton_option
 @click.option("--betas", default=None, help="Shape coefficients overriding the stage's.")
 @click.option(
+    "--cut",
+    "cuts",
+    type=float,
+    multiple=True,
+    metavar="TIME",
+    help="A time code where the animation starts anew (repeat): an edit's splice that changes "
+    "only the joints, which the garment would otherwise be smoothed across. Added to the "
+    "skeleton's smpl:cuts; cuts where the root jumps are found without it. Times outside the "
+    "dressed frames cut nothing.",
+)
+@click.option(
     "--root-layer",
     type=click.Path(dir_okay=False, path_type=Path),
     default=None,
@@ -130,6 +141,7 @@ def dress(
     body_model: Path | None,
     skeleton: str | None,
     betas: str | None,
+    cuts: tuple[float, ...],
     root_layer: Path | None,
     quality: str | None,
     error_budget: float | None,
@@ -192,6 +204,7 @@ def dress(
             body_model=body_model,
             skeleton=skeleton,
             betas=beta_values,
+            cuts=cuts,
             root_layer=root_layer,
             proxy_lod=proxy_lod,
             lod_variants=lod_variants,
@@ -216,5 +229,7 @@ def dress(
         f"in {sum(s.values()):.2f} s (read {s['read']:.2f}, compute {s['compute']:.2f}, "
         f"write {s['write']:.2f})"
     )
+    if result.cuts:
+        click.echo(f"starts anew at time codes {', '.join(f'{t:g}' for t in result.cuts)}")
     for path in result.outputs:
         click.echo(f"wrote {path}")

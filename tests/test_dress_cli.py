@@ -99,6 +99,7 @@ EXPECTED_ERRORS = {
     "joints at time code 1",
     "huge_betas.usda": "smpl:betas: betas[0] = 1e+06 is outside the body's shape space "
     "(|beta| <= 5)",
+    "nan_cuts.usda": "smpl:cuts holds a time code that is not finite",
     "no_animation_values.usda": "no animation: the SkelAnimation /Char/Skel/Anim has no time "
     "samples and no default values on its rotations and translations",
 }
@@ -129,6 +130,7 @@ def test_bad_input_error_lines(name: str, tmp_path: Path) -> None:
         (["-o", "{dir}/g.usdc", "--body-model", "{dir}/none.npz"], "none.npz"),
         (["-o", "{dir}/g.usdc", "--betas", "0,9"], "betas given: betas[1] = 9 is outside"),
         (["-o", "{dir}/g.usdc", "--betas", "-1e6"], "outside the body's shape space"),
+        (["-o", "{dir}/g.usdc", "--cut", "nan"], "a cut must be a finite time code"),
     ],
 )
 def test_bad_arguments(body_layer: Path, tmp_path: Path, extra: list[str], expected: str) -> None:

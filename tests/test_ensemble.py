@@ -27,7 +27,7 @@ from usd_garment.garment.library import load_template
 from usd_garment.garment.template import GarmentTemplate
 from usd_garment.methods.learned import LearnedMethod, predict_latents
 from usd_garment.methods.learned_model import ModelError, load_learned_model, save_learned_model
-from usd_garment.motion.cuts import root_cuts
+from usd_garment.motion.cuts import motion_cuts, root_cuts
 from usd_garment.motion.procedural import make_motion
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.usd.body_layer import write_body_layer
@@ -220,6 +220,41 @@ def test_the_frames_before_a_cut_are_the_garment_of_the_clip_before_it(tmp_path,
     method = SmoothedAlone(tmp_path / "both", exact_fields=True)
     before = method.predict(joined, body, template)[:22]
     np.testing.assert_allclose(before, method.predict(walk, body, template), atol=1e-5)
+
+
+def test_a_declared_cut_splits_a_splice_of_the_joints_alone(tmp_path, body, template):
+    """A walk whose joints take an arm swing's from frame 22 on while its root walks on (an
+    edit's splice: no root jump, so ``root_cuts`` finds none), at 120 fps: declared in
+    ``smpl:cuts`` (or ``dress --cut``), the frames before it are the walk's dressed alone, as at
+    a found cut; undeclared, both smoothings reach across it. ``dress`` reports the cut and
+    honours the layer's declaration and ``--cut`` alike."""
+    _, out, _ = _smoothed(tmp_path, body, template, "latent", "0.1")
+    save_learned_model(tmp_path / "both", replace(load_learned_model(out), posed_smoothing=0.05))
+    walk = make_motion("walk", 42, 120.0, seed=2, body=body)
+    swing = make_motion("arm_swing", 20, 120.0, seed=3, body=body)
+    pose = walk.pose.copy()
+    pose[22:, 1:] = swing.pose[:, 1:]
+    spliced = replace(walk, pose=pose)
+    declared = replace(spliced, cut_times=(22.0,))
+    assert root_cuts(spliced) == () and motion_cuts(declared) == (22,)
+    method = SmoothedAlone(tmp_path / "both", exact_fields=True)
+    alone = method.predict(replace(walk, pose=pose[:22], trans=walk.trans[:22]), body, template)
+    np.testing.assert_allclose(method.predict(declared, body, template)[:22], alone, atol=1e-5)
+    across = method.predict(spliced, body, template)[:22]
+    assert np.abs(across - alone)[-3:].max() > 1e-3
+    marked, plain = tmp_path / "marked.usda", tmp_path / "plain.usda"
+    write_body_layer(marked, declared, body)
+    write_body_layer(plain, spliced, body)
+    layers = []
+    dress = ["--method", "learned", "--model", tmp_path / "both", "--lod", "low", "--json"]
+    for source, extra in ((marked, []), (plain, ["--cut", "22"]), (plain, [])):
+        layers.append(tmp_path / f"out{len(layers)}.usdc")
+        code, output = _run(["dress", source, "-o", layers[-1], *dress, *extra])
+        assert code == 0, output
+        assert json.loads(output)["cuts"] == ([] if source == plain and not extra else [22.0])
+    first, second, third = (read_garment_layer(p)[0] for p in layers)
+    np.testing.assert_array_equal(first, second)
+    assert np.abs(first - third).max() > 1e-4
 
 
 def test_posed_smoothing_is_a_gaussian_over_the_posed_frames(tmp_path, body, template):

@@ -3,6 +3,7 @@ no vertex inside the body where plain skinning has some, and ``eval`` agreeing w
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +20,7 @@ from usd_garment.eval.metrics import evaluate_garment, face_joints
 from usd_garment.eval.push_out import PUSH_OUT_EPS
 from usd_garment.methods import available_methods, get_method
 from usd_garment.usd.body_layer import write_body_layer
+from usd_garment.usd.read import read_smpl_motion
 
 
 @pytest.fixture(scope="module")
@@ -203,3 +205,12 @@ def test_no_acceleration_is_measured_across_a_cut_of_the_motion(
     assert np.isnan(cut[[0, 3, 4, 7]]).all()
     np.testing.assert_array_equal(cut[[1, 2, 5, 6]], across[[1, 2, 5, 6]])
     np.testing.assert_allclose(measured.acceleration, cut, rtol=1e-5)
+    # The same cut declared in the body layer (``smpl:cuts``), the root not moved: the layer's
+    # acceleration is not measured across it either.
+    declared = tmp_path / "declared.usda"
+    write_body_layer(declared, replace(strong_motion(frames=8), cut_times=(4.0,)), closed_body)
+    assert read_smpl_motion(declared, closed_body)[0].cut_times == (4.0,)
+    dress(declared, tmp_path / "still.usdc", method="lbs", template=template)
+    still, _ = evaluate_layer(tmp_path / "still.usdc", declared)
+    assert np.isnan(still.acceleration[[0, 3, 4, 7]]).all()
+    assert np.isfinite(still.acceleration[[1, 2, 5, 6]]).all()

@@ -4,6 +4,7 @@ determinism, limits, smooth starts from the rest pose, the body parts each kind 
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -368,3 +369,25 @@ def test_root_cuts_find_the_stress_suites_jumps_and_nothing_in_real_motion(
     assert root_cuts(SmplMotion(walk.betas, pose, walk.trans, FPS)) == (45,)
     assert root_cuts(SmplMotion(walk.betas, pose, walk.trans, 5.0)) == ()
     assert root_cuts(SmplMotion(walk.betas, walk.pose[:2], walk.trans[:2], FPS)) == ()
+
+
+def test_declared_cuts_land_on_the_first_frame_at_or_after_their_time_code(
+    motions: dict[str, SmplMotion],
+) -> None:
+    """``cut_times`` (``smpl:cuts``, ``dress --cut``) are time codes: each cuts the first frame at
+    or after it, beside the root's cuts; times at or before the first frame or past the last cut
+    nothing; a two-frame motion, too short for ``root_cuts``, can be cut."""
+    from usd_garment.motion.cuts import motion_cuts
+
+    walk = motions["walk"]
+    codes = np.arange(walk.num_frames) + 101.0
+    at = SmplMotion(walk.betas, walk.pose, walk.trans, FPS, time_codes=codes)
+    assert motion_cuts(at) == ()
+    assert motion_cuts(replace(at, cut_times=(146.0,))) == (45,)
+    assert motion_cuts(replace(at, cut_times=(145.5, 146.0))) == (45,)
+    assert motion_cuts(replace(at, cut_times=(50.0, 101.0, codes[-1] + 0.5))) == ()
+    trans = walk.trans.copy()
+    trans[40, 2] += 0.3  # root cuts at 40 and 41
+    assert motion_cuts(replace(at, trans=trans, cut_times=(146.0, 141.0))) == (40, 41, 45)
+    two = SmplMotion(walk.betas, walk.pose[:2], walk.trans[:2], FPS, cut_times=(1.0,))
+    assert motion_cuts(two) == (1,)

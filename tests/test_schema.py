@@ -17,6 +17,7 @@ from usd_garment.usd.schema import (
     apply_garment,
     apply_smpl_body,
     read_betas,
+    read_cuts,
     read_garment,
     read_smpl_body,
     register_schemas,
@@ -39,7 +40,7 @@ def test_registered_definitions() -> None:
     smpl = registry.FindAppliedAPIPrimDefinition("SmplBodyAPI")
     garment = registry.FindAppliedAPIPrimDefinition("GarmentAPI")
     assert smpl is not None and garment is not None
-    assert {"smpl:betas", "smpl:gender", "smpl:model"} <= set(smpl.GetPropertyNames())
+    assert {"smpl:betas", "smpl:gender", "smpl:model", "smpl:cuts"} <= set(smpl.GetPropertyNames())
     assert "garment:body" in garment.GetPropertyNames()
     assert smpl.GetAttributeFallbackValue("smpl:gender") == "neutral"
 
@@ -50,7 +51,7 @@ def test_applied_schemas_round_trip(tmp_path: Path) -> None:
     skel = UsdSkel.Skeleton.Define(stage, "/Char/Body/Skel").GetPrim()
     mesh = UsdGeom.Mesh.Define(stage, "/Char/Garments/tshirt").GetPrim()
     betas = np.linspace(-2, 2, 16)
-    apply_smpl_body(skel, betas, "female", "smplh", "1.1")
+    apply_smpl_body(skel, betas, "female", "smplh", "1.1", cuts=(45.0, 101.5))
     apply_garment(mesh, "tshirt", "learned", "tshirt-v1.pt", "3", "default", skel.GetPath(), "{}")
     stage.GetRootLayer().Save()
 
@@ -66,9 +67,12 @@ def test_applied_schemas_round_trip(tmp_path: Path) -> None:
         "type": "tshirt", "method": "learned", "model": "tshirt-v1.pt", "modelVersion": "3",
         "bodyModel": "default", "solverSettings": "{}", "body": "/Char/Body/Skel",
     }  # fmt: skip
+    np.testing.assert_array_equal(read_cuts(skel), [45.0, 101.5])
     assert read_betas(again.GetPrimAtPath("/Char")) is None
-    attr = skel.GetAttribute("smpl:betas")
-    assert attr.GetVariability() == Sdf.VariabilityUniform and not attr.IsCustom()
+    assert read_cuts(again.GetPrimAtPath("/Char")) is None
+    for name in ("smpl:betas", "smpl:cuts"):
+        attr = skel.GetAttribute(name)
+        assert attr.GetVariability() == Sdf.VariabilityUniform and not attr.IsCustom()
 
 
 def test_opens_without_the_plugin(tmp_path: Path) -> None:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import copy
 import json
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,6 +20,7 @@ from usd_garment.garment.lod import carry, transfer_weights
 from usd_garment.garment.template import GARMENT_NAMES, LODS, GarmentTemplate
 from usd_garment.methods import GarmentMethod, get_method
 from usd_garment.methods.base import predict_chunks, pushes_vertices
+from usd_garment.motion.cuts import motion_cuts
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.usd.garment_layer import (
     CLIP_THRESHOLD,
@@ -45,6 +46,8 @@ class DressResult:
         outputs: the files and folders written.
         method: the method name.
         garment: the garment name.
+        cuts: time codes of the frames where the motion starts anew (``motion_cuts``: found
+            where the root jumps, or declared by ``smpl:cuts`` and ``cuts``).
     """
 
     frames: int
@@ -53,6 +56,7 @@ class DressResult:
     outputs: list[Path] = field(default_factory=list)
     method: str = ""
     garment: str = ""
+    cuts: list[float] = field(default_factory=list)
 
     def to_json(self) -> dict[str, object]:
         return {
@@ -63,6 +67,7 @@ class DressResult:
             "seconds": self.seconds,
             "frames_per_second": self.frames / max(sum(self.seconds.values()), 1e-9),
             "outputs": [str(p) for p in self.outputs],
+            "cuts": self.cuts,
         }
 
 
@@ -77,6 +82,7 @@ def dress(
     body_model: str | Path | None = None,
     skeleton: str | None = None,
     betas: np.ndarray | None = None,
+    cuts: Sequence[float] = (),
     root_layer: str | Path | None = None,
     template: GarmentTemplate | None = None,
     clip_threshold: int = CLIP_THRESHOLD,
@@ -98,6 +104,8 @@ def dress(
         body_model: SMPL-layout body file; None for the embedded default.
         skeleton: Skeleton prim path when the stage has several.
         betas: ``(≤16,)`` shape coefficients overriding the stage's ``smpl:betas``.
+        cuts: time codes where the animation starts anew, besides the stage's ``smpl:cuts``
+            (a splice that changes only the joints; cuts where the root jumps are found).
         root_layer: also write a layer that sublayers the garment layer and the input.
         template: a ready template (tests, benchmarks); skips loading one.
         clip_threshold: frames × vertices above which the layer uses value clips.
@@ -127,6 +135,9 @@ def dress(
     start = time.perf_counter()
     body = load_body_model(body_model)
     motion, info = read_smpl_motion(input_path, body, skeleton, frames, betas)
+    if not np.isfinite(np.asarray(cuts, dtype=np.float64)).all():
+        raise ValueError("a cut must be a finite time code")
+    motion.cut_times = tuple(sorted({*motion.cut_times, *map(float, cuts)}))
     if template is None:
         template = load_template(garment, lod=lod, body_model_path=body_model)
     variants = []  # coarser levels of detail than the computed one
@@ -197,6 +208,7 @@ def dress(
         outputs=writer.outputs,
         method=garment_method.name,
         garment=template.name,
+        cuts=motion.time_codes[list(motion_cuts(motion))].tolist(),
     )
 
 

@@ -127,6 +127,12 @@ def main() -> None:
     apply_smpl_body(skel.GetPrim(), np.array([1e6] + [0.0] * 9), "neutral", "default")
     stage.GetRootLayer().Export(str(BAD / "huge_betas.usda"))
 
+    stage = _stage()
+    skel = _skeleton(stage, JOINTS, REST)
+    _animation(stage, skel, identity, 3)
+    apply_smpl_body(skel.GetPrim(), np.zeros(10), "neutral", "default", cuts=(1.0, np.nan))
+    stage.GetRootLayer().Export(str(BAD / "nan_cuts.usda"))
+
     stage = _stage()  # rotations and translations declared without samples or defaults
     _animation(stage, _skeleton(stage, JOINTS, REST), identity, 0)
     stage.SetStartTimeCode(0)

@@ -14,7 +14,7 @@ from usd_garment.eval.body_distance import BodyPool
 from usd_garment.eval.metrics import GarmentMetrics, evaluate_garment, face_joints
 from usd_garment.garment.lod import carry_to_lod, lod_with_vertices
 from usd_garment.garment.template import GARMENT_NAMES
-from usd_garment.motion.cuts import root_cuts
+from usd_garment.motion.cuts import motion_cuts
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.usd.errors import UsdInputError
 from usd_garment.usd.garment_read import read_garment_layer
@@ -73,11 +73,12 @@ def evaluate_layer(
     lod: str | None = None,
 ) -> tuple[GarmentMetrics, np.ndarray]:
     """Metrics of the garment of ``garment_layer`` (its ``lod`` variant ``lod``; None: the
-    selected one) on the body of ``body_input``; against a
-    ``reference`` layer of another level of detail of the same garment, the reference is
-    carried to the garment's level of detail first (:mod:`usd_garment.garment.lod`); no
-    acceleration is measured across the body's cuts (``root_cuts``: a teleport, a snapped
-    heading). ``pool``: worker processes that measure blocks of frames (the same figures).
+    selected one) on the body of ``body_input``; against a ``reference`` layer of another
+    level of detail of the same garment, the reference is carried to the garment's level of
+    detail first (:mod:`usd_garment.garment.lod`); no acceleration is measured across the body's
+    cuts (``motion_cuts``: a teleport, a snapped heading, a splice the body layer's
+    ``smpl:cuts`` declares). ``pool``: worker processes that measure blocks of frames (the same
+    figures).
 
     Returns:
         The metrics and the ``(T,)`` time codes they refer to.
@@ -101,6 +102,6 @@ def evaluate_layer(
     faces = body.faces.numpy()
     parts = face_joints(body.weights.numpy(), faces)
     # the motion's cuts at the garment's frames: the first at or after each
-    cuts = [j for j in np.searchsorted(idx, root_cuts(motion)).tolist() if 0 < j < len(idx)]
+    cuts = [j for j in np.searchsorted(idx, motion_cuts(motion)).tolist() if 0 < j < len(idx)]
     metrics = evaluate_garment(points, vertices, faces, fps, ref, pool, parts, cuts)
     return metrics, info.time_codes

@@ -132,7 +132,7 @@ def evaluate_garment(
     worker processes that measure blocks of frames (the same figures); ``face_parts`` ``(F,)``:
     the SMPL joint of each body face (:func:`face_joints`), to count where the vertices inside
     elsewhere are; ``cuts``: the frames where the motion starts anew
-    (:func:`~usd_garment.motion.cuts.root_cuts`), around which no acceleration is measured."""
+    (:func:`~usd_garment.motion.cuts.motion_cuts`), around which no acceleration is measured."""
     points = np.asarray(points, dtype=np.float64)
     t_frames, n = points.shape[:2]
     finite = np.isfinite(points).all(axis=-1)  # (T, N)

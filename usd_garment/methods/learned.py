@@ -48,7 +48,7 @@ from usd_garment.methods.learned_posing import (
     can_fork,
     pose_chunk,
 )
-from usd_garment.motion.cuts import root_cuts, smooth_runs
+from usd_garment.motion.cuts import motion_cuts, smooth_runs
 from usd_garment.motion.resample import cut_at
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.regressor.descriptor import MODEL_FPS, at_model_rate, motion_descriptor
@@ -128,12 +128,12 @@ def predict_latents(
     once, ``at_model_rate``; each run between its cuts on its own), its GRU, the codes smoothed in
     time when the model says so (a Gaussian of ``model.latent_smoothing`` seconds, reflected at
     the ends and at each cut), then interpolated back to the motion's frames (:func:`to_frames`).
-    ``cuts``: the motion's :func:`root_cuts`, where the caller has them (None: found here).
+    ``cuts``: the motion's :func:`motion_cuts`, where the caller has them (None: found here).
 
     The members' GRUs run in threads: a recurrence is a chain of small matrix products that
     keeps one core busy, so on two cores three members take about half the time."""
     betas = torch.as_tensor(motion.betas, dtype=torch.float32)
-    cuts = root_cuts(motion) if cuts is None else cuts
+    cuts = motion_cuts(motion) if cuts is None else cuts
     resampled, at_30 = at_model_rate(motion, cuts)  # once for every member
     gammas = [
         motion_descriptor(resampled.pose, resampled.trans, member.pose_codec, cuts=at_30)
@@ -358,7 +358,7 @@ class LearnedMethod:
         t_frames = motion.num_frames
         tangents: list[Tangent] = []  # the last one is kept across chunks (_tangents)
         lap("load")
-        cuts = root_cuts(motion)  # the regressor's and the smoothing's
+        cuts = motion_cuts(motion)  # the regressor's and the smoothing's
         z = predict_latents(model, motion, cuts)
         smoothing = Smoothing.of(self.posed_smoothing(model), motion.fps, cuts)
         lap("regressor")

@@ -83,7 +83,7 @@ class Smoothing:
     """A Gaussian of ``sigma`` frames over the frames of a posed garment (``LearnedModel``'s
     ``posed_smoothing`` at the input's frame rate; 0: none), the nearest frame repeated beyond
     the motion's ends and on each side of its ``cuts`` (the frames where it starts anew,
-    :func:`~usd_garment.motion.cuts.root_cuts`: across a teleport of the root the Gaussian
+    :func:`~usd_garment.motion.cuts.motion_cuts`: across a teleport of the root the Gaussian
     would carry the garment a frame off the body). A chunk of frames is smoothed as the whole
     motion would be where it is posed with :attr:`radius` frames of the motion on each side
     (fewer at its ends), with the cuts :meth:`within` it."""

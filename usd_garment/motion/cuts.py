@@ -1,5 +1,7 @@
 """Cuts in a motion: frames where the root jumps (a teleport, a heading snapped, two clips joined
-end to end), so that what is smoothed over frames is not smoothed across them.
+end to end), and those the animation declares (``SmplMotion.cut_times``: a splice that changes
+only the joints, which no threshold tells from a fast swing), so that what is smoothed over
+frames is not smoothed across them.
 
 Units: metres, radians, frames per second.
 """
@@ -27,6 +29,16 @@ CUT_ROTATION = 0.5
 #: low frame rate a real step may change more than :data:`CUT_DISTANCE` from one to the next.
 CUT_ACCELERATION = 50.0
 CUT_ANGULAR_ACCELERATION = 400.0
+
+
+def motion_cuts(motion: SmplMotion) -> tuple[int, ...]:
+    """The frames ``k`` (0 < k < T, increasing) where ``motion`` starts anew: its
+    :func:`root_cuts` and its declared ``cut_times``, each at the first frame whose time code is
+    at or after it (declared times at or before the first frame, or after the last, cut
+    nothing)."""
+    declared = np.searchsorted(motion.time_codes, np.asarray(motion.cut_times, dtype=np.float64))
+    found = set(root_cuts(motion)) | {int(k) for k in declared if 0 < k < motion.num_frames}
+    return tuple(sorted(found))
 
 
 def root_cuts(motion: SmplMotion) -> tuple[int, ...]:

@@ -13,7 +13,7 @@ from usd_garment.motion.sequence import SmplMotion
 def resample_motion(motion: SmplMotion, fps: float, cuts: Sequence[int] = ()) -> SmplMotion:
     """``motion`` sampled at ``fps`` over the same duration (first frame kept, last frame at or
     before the original end). Time codes restart at 0, one per frame. A frame that falls between
-    a cut (a frame of ``cuts``, where the motion starts anew: ``root_cuts``) and the frame
+    a cut (a frame of ``cuts``, where the motion starts anew: ``motion_cuts``) and the frame
     before it is that frame before, not a blend of the two sides; the cuts of the result are
     :func:`resampled_cuts`."""
     if not np.isfinite(fps) or fps <= 0:

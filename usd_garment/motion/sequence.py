@@ -20,6 +20,10 @@ class SmplMotion:
         time_codes: ``(T,)`` USD time codes of the frames.
         gender: ``"neutral"``, ``"male"`` or ``"female"``.
         model: the body model name the betas belong to.
+        cut_times: time codes where the animation is declared to start anew (an edit's splice;
+            ``smpl:cuts`` of the layer, ``dress --cut``): nothing is smoothed or differentiated
+            across them. Cuts where the root jumps are also found from the motion itself
+            (:func:`~usd_garment.motion.cuts.motion_cuts`).
     """
 
     betas: np.ndarray
@@ -29,6 +33,7 @@ class SmplMotion:
     time_codes: np.ndarray = field(default_factory=lambda: np.zeros(0))
     gender: str = "neutral"
     model: str = "default"
+    cut_times: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         t = self.pose.shape[0]

@@ -37,7 +37,7 @@ from collections.abc import Sequence
 import numpy as np
 import torch
 
-from usd_garment.motion.cuts import root_cuts
+from usd_garment.motion.cuts import motion_cuts
 from usd_garment.motion.resample import resample_motion, resampled_cuts
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.regressor.pose_code import PoseCodec
@@ -163,7 +163,7 @@ def motion_descriptor(
     cuts: Sequence[int] = (),
 ) -> torch.Tensor:
     """The motion descriptor γ ``(T, 3·code_size + 12)`` (42 for a 10-d code) of a motion; with
-    ``cuts`` (frames where the motion starts anew, ``root_cuts``), of each run between them on
+    ``cuts`` (frames where the motion starts anew, ``motion_cuts``), of each run between them on
     its own, its first derivatives padded as a motion's (a root teleported 0.5 m in a frame
     is 15 m/s to the regressor otherwise, and its GRU took 0.6 s to settle).
 
@@ -209,7 +209,7 @@ def motion_descriptor(
 
 def at_model_rate(motion: SmplMotion, cuts: Sequence[int]) -> tuple[SmplMotion, tuple[int, ...]]:
     """``motion`` resampled to :data:`MODEL_FPS` (``motion`` itself when it already runs at that
-    rate), and its ``cuts`` (its frames where it starts anew, ``root_cuts``) at that rate."""
+    rate), and its ``cuts`` (its frames where it starts anew, ``motion_cuts``) at that rate."""
     resampled = resample_motion(motion, MODEL_FPS, cuts)
     return resampled, resampled_cuts(cuts, motion.fps, MODEL_FPS, resampled.num_frames)
 
@@ -219,6 +219,6 @@ def describe_motion(
 ) -> tuple[torch.Tensor, SmplMotion]:
     """γ ``(T', 42)`` of ``motion`` resampled to :data:`MODEL_FPS`, and that resampled motion
     (:func:`at_model_rate`); the runs between its cuts each on their own."""
-    resampled, cuts = at_model_rate(motion, root_cuts(motion))
+    resampled, cuts = at_model_rate(motion, motion_cuts(motion))
     gamma = motion_descriptor(resampled.pose, resampled.trans, codec, MODEL_FPS, padding, cuts)
     return gamma, resampled

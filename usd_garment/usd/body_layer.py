@@ -141,7 +141,9 @@ def _author_skeleton(stage: Usd.Stage, motion: SmplMotion, rest_joints: np.ndarr
     skeleton.CreateJointNamesAttr(Vt.TokenArray([p.rsplit("/", 1)[-1] for p in joints]))
     skeleton.CreateBindTransformsAttr(_translations_to_matrices(rest_joints))
     skeleton.CreateRestTransformsAttr(_translations_to_matrices(offsets))
-    apply_smpl_body(skeleton.GetPrim(), motion.betas, motion.gender, motion.model)
+    apply_smpl_body(
+        skeleton.GetPrim(), motion.betas, motion.gender, motion.model, cuts=motion.cut_times
+    )
 
     anim = UsdSkel.Animation.Define(stage, ANIMATION_PATH)
     anim.CreateJointsAttr(joints)

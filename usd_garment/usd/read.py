@@ -34,7 +34,7 @@ from usd_garment.body.model import BodyModel
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.usd.errors import UsdInputError
 from usd_garment.usd.joint_aliases import match_smpl_joints
-from usd_garment.usd.schema import read_betas, read_smpl_body
+from usd_garment.usd.schema import read_betas, read_cuts, read_smpl_body
 from usd_garment.usd.stage import canonical_to_world_matrix, open_stage, stage_units
 
 _J = {name: i for i, name in enumerate(SMPL_JOINT_NAMES)}
@@ -107,15 +107,16 @@ def read_smpl_motion(
             those, the first 10 must be finite and within ``±MAX_ABS_BETA``.
 
     Returns:
-        The motion (pose ``(T, 24, 3)`` rad, trans ``(T, 3)`` m, canonical frame, float32) and
-        what a writer needs to know about the stage.
+        The motion (pose ``(T, 24, 3)`` rad, trans ``(T, 3)`` m, canonical frame, float32;
+        ``cut_times``: the skeleton's ``smpl:cuts``) and what a writer needs to know about the
+        stage.
 
     Raises:
         UsdInputError: unreadable file, no (or no such) animated skeleton, missing SMPL joints,
             no animation (rotations or translations without any value), rotations, translations
             or scales holding a different count than the animation's joints, non-finite
-            transforms, betas that are not finite or beyond ``MAX_ABS_BETA``, an empty time
-            range or bad ``frames``.
+            transforms, betas that are not finite or beyond ``MAX_ABS_BETA``, cuts that are not
+            finite, an empty time range or bad ``frames``.
     """
     path = Path(path)
     stage = open_stage(path)
@@ -189,6 +190,7 @@ def read_smpl_motion(
         time_codes=codes,
         gender=meta.get("gender", "neutral"),
         model=meta.get("model", "default"),
+        cut_times=_cut_times(prim, skel_root, where),
     )
     default_prim = stage.GetDefaultPrim()
     info = StageInfo(
@@ -204,6 +206,22 @@ def read_smpl_motion(
         canonical_to_world=to_world,
     )
     return motion, info
+
+
+def _cut_times(prim: Usd.Prim, skel_root: Usd.Prim, where: str) -> tuple[float, ...]:
+    """The skeleton's (or SkelRoot's) ``smpl:cuts``, sorted, each once; none when not authored.
+
+    Raises:
+        UsdInputError: a cut that is not a finite time code.
+    """
+    values = read_cuts(prim)
+    if values is None:
+        values = read_cuts(skel_root)
+    if values is None:
+        return ()
+    if not np.isfinite(values).all():
+        raise UsdInputError(f"{where}: smpl:cuts holds a time code that is not finite")
+    return tuple(float(t) for t in np.unique(values))
 
 
 def _pick_skeleton(stage: Usd.Stage, skeleton: str | None, path: Path) -> UsdSkel.Skeleton:

@@ -1,10 +1,11 @@
 """Register the package's codeless USD schemas and apply / read them on prims.
 
 ``SmplBodyAPI`` (on a Skeleton): ``smpl:betas``, ``smpl:gender``, ``smpl:model``,
-``smpl:modelVersion``. ``GarmentAPI`` (on a garment Mesh): ``garment:type``, ``garment:method``,
-``garment:model``, ``garment:modelVersion``, ``garment:bodyModel``, ``garment:solverSettings``
-and the relationship ``garment:body``. Files that use them still open where the plugin is not
-registered: the applied schema names and the attributes are ordinary scene description.
+``smpl:modelVersion``, ``smpl:cuts``. ``GarmentAPI`` (on a garment Mesh): ``garment:type``,
+``garment:method``, ``garment:model``, ``garment:modelVersion``, ``garment:bodyModel``,
+``garment:solverSettings`` and the relationship ``garment:body``. Files that use them still open
+where the plugin is not registered: the applied schema names and the attributes are ordinary
+scene description.
 """
 
 from __future__ import annotations
@@ -36,11 +37,13 @@ def apply_smpl_body(
     gender: str = "neutral",
     model: str = "",
     model_version: str = "",
+    cuts: tuple[float, ...] = (),
 ) -> None:
     """Apply ``SmplBodyAPI`` to ``prim`` (a Skeleton) and author its attributes.
 
     Args:
         betas: ``(K,)`` shape coefficients.
+        cuts: time codes where the animation starts anew (``smpl:cuts``; none: not authored).
     """
     prim.AddAppliedSchema(SMPL_BODY_API)
     values = Vt.FloatArray.FromNumpy(np.ascontiguousarray(betas, dtype=np.float32))
@@ -49,11 +52,22 @@ def apply_smpl_body(
     _uniform(prim, "smpl:model", Sdf.ValueTypeNames.String).Set(model)
     if model_version:
         _uniform(prim, "smpl:modelVersion", Sdf.ValueTypeNames.String).Set(model_version)
+    if cuts:
+        values = Vt.DoubleArray.FromNumpy(np.asarray(cuts, dtype=np.float64))
+        _uniform(prim, "smpl:cuts", Sdf.ValueTypeNames.DoubleArray).Set(values)
 
 
 def read_betas(prim: Usd.Prim) -> np.ndarray | None:
     """``(K,)`` float64 ``smpl:betas`` of ``prim``, or None when none are authored."""
     attr = prim.GetAttribute("smpl:betas")
+    if not attr or not attr.HasAuthoredValue():
+        return None
+    return np.asarray(attr.Get(), dtype=np.float64).reshape(-1)
+
+
+def read_cuts(prim: Usd.Prim) -> np.ndarray | None:
+    """``(C,)`` float64 ``smpl:cuts`` of ``prim`` (time codes), or None when none are authored."""
+    attr = prim.GetAttribute("smpl:cuts")
     if not attr or not attr.HasAuthoredValue():
         return None
     return np.asarray(attr.Get(), dtype=np.float64).reshape(-1)
