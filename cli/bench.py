@@ -168,7 +168,7 @@ def _plain(value: object) -> object:
     "--stress",
     is_flag=True,
     help="Add the stress suite: β₁ = ±3, motion 2× and 4× faster, a long sequence, self-contact "
-    "poses, root jumps (and each --capture).",
+    "poses, root jumps, a declared splice of the joints (and each --capture).",
 )
 @click.option(
     "--stress-frames",

@@ -167,7 +167,7 @@ def test_stress_inputs_are_what_they_say(tmp_path: Path, body_model: BodyModel) 
     from usd_garment.eval.stress import STRESS_FRAMES, stress_motions, write_stress_inputs
     from usd_garment.usd.read import read_smpl_motion
 
-    names = ["shape_beta1_plus3", "fast_x4", "root_jumps", "long_40"]
+    names = ["shape_beta1_plus3", "fast_x4", "root_jumps", "joint_splice", "long_40"]
     inputs = write_stress_inputs(tmp_path, body_model, long_frames=40, names=names)
     assert [case.name for case in inputs] == names
     motions = {case.name: read_smpl_motion(case.body, body_model)[0] for case in inputs}
@@ -177,6 +177,11 @@ def test_stress_inputs_are_what_they_say(tmp_path: Path, body_model: BodyModel) 
     # The root jumps: 0.5 m sideways in one frame, the heading snapped by 90 degrees.
     step = np.linalg.norm(np.diff(motions["root_jumps"].trans, axis=0), axis=1)
     assert step.max() > 0.45 and np.sort(step)[-2] < 0.1
+    # The splice: the walk's root, another motion's joints from frame 45, the cut declared.
+    splice, walk = motions["joint_splice"], motions["root_jumps"]
+    assert splice.cut_times == (45.0,) and not motions["root_jumps"].cut_times
+    np.testing.assert_allclose(splice.trans[:30], walk.trans[:30], atol=1e-5)
+    assert np.abs(np.diff(splice.pose[:, 1:], axis=0)).max(axis=(1, 2)).argmax() == 44
     made = stress_motions(body_model, long_frames=40)
     assert set(made) >= set(names) | {"arms_folded", "hands_on_hips", "fast_x2"}
     with pytest.raises(ValueError, match="unknown stress case 'nope'"):

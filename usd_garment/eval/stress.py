@@ -1,7 +1,8 @@
 """The stress suite's inputs: animated bodies where garment methods are known to fail: extreme
 shapes (β₁ at ±3σ), motion played 2 and 4 times faster, a very long sequence, poses with
 self-contact (forearms folded before the chest, wrists meeting at the midline; hands on the
-hips), sudden root jumps, and real captures. Each is written as a body layer, as a user would
+hips), sudden root jumps, a splice of the joints alone (its cut declared, as an edit would), and
+real captures. Each is written as a body layer, as a user would
 bring it."""
 
 from __future__ import annotations
@@ -66,6 +67,16 @@ def _root_jumps(motion: SmplMotion) -> SmplMotion:
     return SmplMotion(motion.betas, pose, trans, motion.fps, model=motion.model)
 
 
+def _joint_splice(walk: SmplMotion, other: SmplMotion) -> SmplMotion:
+    """``walk`` whose joints take ``other``'s from half way in while its root walks on (an edit's
+    splice no root jump shows), the cut declared there (``cut_times``, ``smpl:cuts``)."""
+    half = walk.num_frames // 2
+    pose = walk.pose.copy()
+    pose[half:, 1:] = other.pose[half:, 1:]
+    return SmplMotion(walk.betas, pose, walk.trans, walk.fps, model=walk.model,
+                      cut_times=(float(walk.time_codes[half]),))  # fmt: skip
+
+
 def stress_motions(
     body: BodyModel, long_frames: int = LONG_FRAMES
 ) -> dict[str, Callable[[], SmplMotion]]:
@@ -88,6 +99,10 @@ def stress_motions(
             body, STRESS_FRAMES, {"shoulder": (0.9, 0.25, -0.95), "elbow": (0.0, -1.7, 0.0)}
         ),
         "root_jumps": lambda: _root_jumps(make_motion("walk", STRESS_FRAMES, seed=103, body=body)),
+        "joint_splice": lambda: _joint_splice(
+            make_motion("walk", STRESS_FRAMES, seed=103, body=body),
+            make_motion("arm_raise", STRESS_FRAMES, seed=5, body=body),
+        ),
         f"long_{long_frames}": lambda: make_motion("walk", long_frames, seed=104, body=body),
     }
 
