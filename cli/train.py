@@ -56,7 +56,9 @@ def _train_options(command: F) -> F:
         click.option("--planes", "planes_path", type=click.Path(dir_okay=False, path_type=Path),
                      default=None, help="Posed collision planes of --data for a regressor with "
                      "lambda_posed > 0 (.npz): read when made for this set, else computed and "
-                     "written there; default: computed, not kept."),
+                     "written there (for a set that grew by 'project --update' from the one "
+                     "they were made for, only its new sequences); default: computed, not "
+                     "kept."),
     )):  # fmt: skip
         command = option(command)
     return command
@@ -222,25 +224,36 @@ def _posed_planes(
 ) -> PosedPlanes:
     """The posed collision planes of the training and validation frames: read from ``path``
     when it holds this set's, else computed with a progress bar (one query of the posed body
-    per frame: minutes for a few thousand frames) and written to ``path`` when given."""
+    per frame: minutes for a few thousand frames; those of the set's first sequences kept where
+    ``path`` holds the planes of the set it grew from) and written to ``path`` when given.
+
+    Raises:
+        ValueError: ``path`` holds the planes of another set (or radius).
+    """
     from usd_garment.eval.body_distance import body_pool
     from usd_garment.training.posed_planes import (
         PLANE_RADIUS,
-        load_posed_planes,
         posed_planes,
+        reusable_posed_planes,
         save_posed_planes,
     )
 
+    known = None
     if path is not None and path.is_file():
-        click.echo(f"posed planes from {path}")
-        return load_posed_planes(path, canonical, PLANE_RADIUS)
+        known, sequences = reusable_posed_planes(path, canonical, PLANE_RADIUS)
+        if sequences == canonical.num_sequences:
+            click.echo(f"posed planes from {path}")
+            return known
+        if sequences == 0:
+            raise ValueError(f"{path}: posed planes of another training set (or radius)")
+        click.echo(f"posed planes of the first {sequences} sequences from {path}")
     with tqdm(desc="posed planes", unit="sequence", disable=None) as bar, body_pool(2) as pool:
 
         def progress(done: int, total: int) -> None:
             bar.total = total
             bar.update(done - bar.n)
 
-        planes = posed_planes(canonical, body, fields, pool=pool, progress=progress)
+        planes = posed_planes(canonical, body, fields, pool=pool, progress=progress, known=known)
     if path is not None:
         save_posed_planes(path, planes, canonical, PLANE_RADIUS)
         click.echo(f"wrote the posed planes {path}")

@@ -108,3 +108,32 @@ def test_planes_are_saved_and_read_back_for_their_own_set_only(tmp_path: Path) -
     data.pose[1, 16, 2] += 0.1
     with pytest.raises(ValueError, match="another training set"):
         load_posed_planes(path, data, 0.013)
+
+
+def test_the_planes_of_a_set_that_grew_are_kept_for_its_first_sequences(tmp_path: Path) -> None:
+    """A set with a sequence appended (``project --update``): the planes saved for the set it
+    grew from are its first sequence's (found by :func:`reusable_posed_planes`), the new
+    sequence's are computed, and the whole equals the planes computed afresh; ``train
+    regressor --planes`` does so and writes the grown set's planes over the file."""
+    from usd_garment.canonical.dataset import concat_canonical_sets
+    from usd_garment.cli.train import _posed_planes
+    from usd_garment.training.posed_planes import PLANE_RADIUS, reusable_posed_planes
+
+    body, fields = load_body_model(), load_body_fields()
+    first = _tshirt_set(2)
+    second = _tshirt_set(3)
+    second.pose[:, 18, 1] = 0.3  # another motion
+    grown = concat_canonical_sets(first, second)
+    path = tmp_path / "planes.npz"
+    save_posed_planes(path, posed_planes(first, body, fields), first, PLANE_RADIUS)
+    known, sequences = reusable_posed_planes(path, grown, PLANE_RADIUS)
+    assert sequences == 1 and len(known.valid) == 2
+    assert reusable_posed_planes(path, second, PLANE_RADIUS)[1] == 0  # not its beginning
+    fresh = posed_planes(grown, body, fields)
+    planes = _posed_planes(grown, body, fields, path)
+    for a, b in ((planes.normal, fresh.normal), (planes.offset, fresh.offset)):
+        torch.testing.assert_close(a, b)
+    assert torch.equal(planes.valid, fresh.valid) and bool(fresh.valid[2:].any())
+    assert reusable_posed_planes(path, grown, PLANE_RADIUS)[1] == 2
+    with pytest.raises(ValueError, match="another training set"):
+        _posed_planes(second, body, fields, path)

@@ -75,17 +75,26 @@ def posed_planes(
     radius: float = PLANE_RADIUS,
     pool: BodyPool | None = None,
     progress: Callable[[int, int], None] | None = None,
+    known: PosedPlanes | None = None,
 ) -> PosedPlanes:
     """The planes of the frames of ``data``'s sequences in ``splits`` (the other frames get
     none). ``pool``: worker processes for the body queries; ``progress(done, total)`` after each
-    sequence."""
+    sequence. ``known``: the planes of ``data``'s first sequences (their T₀ frames, made with
+    the same splits and radius: :func:`reusable_posed_planes`), kept; only the others are
+    computed."""
     garment_model = GarmentModel(body, fields)
     surface = BodySurface(body.faces.numpy(), body.num_vertices)
     t_frames, n = data.canonical.shape[:2]
     normal = torch.zeros((t_frames, n, 3))
     offset = torch.zeros((t_frames, n))
     valid = torch.zeros((t_frames, n), dtype=torch.bool)
-    chosen = [s for s, split in enumerate(data.splits) if split in splits]
+    kept = 0 if known is None else len(known.valid)
+    if known is not None:
+        normal[:kept], offset[:kept], valid[:kept] = known.normal, known.offset, known.valid
+    chosen = [
+        s for s, split in enumerate(data.splits)
+        if split in splits and data.frame_offsets[s + 1] > kept
+    ]  # fmt: skip
     for done, s in enumerate(chosen):
         frames = data.sequence(s)
         motion = data.motion(s)
@@ -119,14 +128,19 @@ def posed_planes(
     return PosedPlanes(normal, offset, valid)
 
 
-def _fingerprint(data: CanonicalSet, radius: float) -> str:
-    """A digest of the set's frames (every 64th canonical garment, all poses, the sequence
-    bounds) and the radius: planes are reused only for the set they were made from."""
+def _fingerprint(data: CanonicalSet, radius: float, sequences: int | None = None) -> str:
+    """A digest of the set's first ``sequences`` sequences (None: all; their frames: every
+    64th canonical garment, all poses, the sequence bounds, the splits) and the radius: planes
+    are reused only for the set they were made from, or for a set that begins with it."""
+    count = data.num_sequences if sequences is None else sequences
+    end = int(data.frame_offsets[count])
     digest = hashlib.sha1()
-    step = max(1, len(data.canonical) // 64)
-    for array in (data.canonical[::step], data.pose, data.trans, data.frame_offsets):
+    step = max(1, end // 64)
+    arrays = (data.canonical[:end:step], data.pose[:end], data.trans[:end],
+              data.frame_offsets[: count + 1])  # fmt: skip
+    for array in arrays:
         digest.update(np.ascontiguousarray(array, dtype=np.float64).tobytes())
-    digest.update(repr((list(data.splits), radius)).encode())
+    digest.update(repr((list(data.splits[:count]), radius)).encode())
     return digest.hexdigest()
 
 
@@ -147,11 +161,27 @@ def load_posed_planes(path: str | Path, data: CanonicalSet, radius: float) -> Po
     Raises:
         ValueError: the file was made for another set or radius.
     """
+    planes, sequences = reusable_posed_planes(path, data, radius)
+    if sequences < data.num_sequences:
+        raise ValueError(f"{path}: posed planes of another training set (or radius)")
+    return planes
+
+
+def reusable_posed_planes(
+    path: str | Path, data: CanonicalSet, radius: float
+) -> tuple[PosedPlanes, int]:
+    """The planes saved by :func:`save_posed_planes` and how many of ``data``'s sequences they
+    are for: all of them, or its first K when ``data`` grew from the set they were made for
+    (``project --update`` appends sequences); 0 when they are another set's or radius's."""
     with np.load(Path(path)) as f:
-        if str(f["fingerprint"]) != _fingerprint(data, radius):
-            raise ValueError(f"{path}: posed planes of another training set (or radius)")
-        return PosedPlanes(
+        planes = PosedPlanes(
             torch.from_numpy(f["normal"]),
             torch.from_numpy(f["offset"]),
             torch.from_numpy(f["valid"]),
         )
+        fingerprint = str(f["fingerprint"])
+    ends = data.frame_offsets.tolist()
+    count = ends.index(len(planes.valid)) if len(planes.valid) in ends[1:] else 0
+    if count == 0 or fingerprint != _fingerprint(data, radius, count):
+        return planes, 0
+    return planes, count
