@@ -101,3 +101,31 @@ def test_opens_without_the_plugin(tmp_path: Path) -> None:
         out.stdout.strip()
         == "['SmplBodyAPI'] [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0] male"
     )
+
+
+def test_cuts_authored_over_a_shot_reach_the_reader(tmp_path: Path, body_model) -> None:
+    """A studio declares the cuts of a shot in a layer of its own that sublayers the animation
+    (the animation's file unchanged): the composed skeleton's ``smpl:cuts`` are the motion's
+    ``cut_times``, and ``dress`` of that layer reports them."""
+    from usd_garment.dress import dress
+    from usd_garment.motion.procedural import make_motion
+    from usd_garment.usd.body_layer import SKELETON_PATH, write_body_layer
+    from usd_garment.usd.read import read_smpl_motion
+
+    shot = tmp_path / "shot.usdc"
+    write_body_layer(shot, make_motion("walk", 6, body=body_model), body_model)
+    before = shot.read_bytes()
+    edit = tmp_path / "edit.usda"
+    stage = Usd.Stage.CreateNew(str(edit))
+    stage.GetRootLayer().subLayerPaths.append(shot.name)
+    stage.OverridePrim(SKELETON_PATH).CreateAttribute(
+        "smpl:cuts",
+        Sdf.ValueTypeNames.DoubleArray,
+        custom=False,
+        variability=Sdf.VariabilityUniform,
+    ).Set([3.0, 2.5])
+    stage.GetRootLayer().Save()
+    assert read_smpl_motion(shot, body_model)[0].cut_times == ()
+    assert read_smpl_motion(edit, body_model)[0].cut_times == (2.5, 3.0)
+    result = dress(edit, tmp_path / "g.usdc", method="lbs", lod="low")
+    assert result.cuts == [3.0] and shot.read_bytes() == before
