@@ -59,15 +59,17 @@ def apply_smpl_body(
 
 def read_betas(prim: Usd.Prim) -> np.ndarray | None:
     """``(K,)`` float64 ``smpl:betas`` of ``prim``, or None when none are authored."""
-    attr = prim.GetAttribute("smpl:betas")
-    if not attr or not attr.HasAuthoredValue():
-        return None
-    return np.asarray(attr.Get(), dtype=np.float64).reshape(-1)
+    return _authored_array(prim, "smpl:betas")
 
 
 def read_cuts(prim: Usd.Prim) -> np.ndarray | None:
     """``(C,)`` float64 ``smpl:cuts`` of ``prim`` (time codes), or None when none are authored."""
-    attr = prim.GetAttribute("smpl:cuts")
+    return _authored_array(prim, "smpl:cuts")
+
+
+def _authored_array(prim: Usd.Prim, name: str) -> np.ndarray | None:
+    """The authored array attribute ``name`` of ``prim`` as a flat float64 array, or None."""
+    attr = prim.GetAttribute(name)
     if not attr or not attr.HasAuthoredValue():
         return None
     return np.asarray(attr.Get(), dtype=np.float64).reshape(-1)
