@@ -241,11 +241,11 @@ def _posed_planes(
     known = None
     if path is not None and path.is_file():
         known, sequences = reusable_posed_planes(path, canonical, PLANE_RADIUS)
+        if known is None:
+            raise ValueError(f"{path}: posed planes of another training set (or radius)")
         if sequences == canonical.num_sequences:
             click.echo(f"posed planes from {path}")
             return known
-        if sequences == 0:
-            raise ValueError(f"{path}: posed planes of another training set (or radius)")
         click.echo(f"posed planes of the first {sequences} sequences from {path}")
     with tqdm(desc="posed planes", unit="sequence", disable=None) as bar, body_pool(2) as pool:
 
