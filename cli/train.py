@@ -238,11 +238,9 @@ def _posed_planes(
         save_posed_planes,
     )
 
-    known = None
+    known: PosedPlanes | None = None
     if path is not None and path.is_file():
         known, sequences = reusable_posed_planes(path, canonical, PLANE_RADIUS)
-        if known is None:
-            raise ValueError(f"{path}: posed planes of another training set (or radius)")
         if sequences == canonical.num_sequences:
             click.echo(f"posed planes from {path}")
             return known

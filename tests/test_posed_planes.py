@@ -15,9 +15,10 @@ from usd_garment.fields.body_fields import load_body_fields
 from usd_garment.garment.library import load_template
 from usd_garment.garment.model import GarmentModel
 from usd_garment.training.posed_planes import (
+    PLANE_RADIUS,
     PosedPlanes,
-    load_posed_planes,
     posed_planes,
+    reusable_posed_planes,
     save_posed_planes,
 )
 
@@ -99,15 +100,16 @@ def test_planes_are_saved_and_read_back_for_their_own_set_only(tmp_path: Path) -
     planes = posed_planes(data, load_body_model(), load_body_fields(), radius=0.013)
     path = tmp_path / "planes.npz"
     save_posed_planes(path, planes, data, 0.013)
-    back = load_posed_planes(path, data, 0.013)
+    back, sequences = reusable_posed_planes(path, data, 0.013)
+    assert sequences == data.num_sequences
     for a, b in ((planes.normal, back.normal), (planes.offset, back.offset)):
         torch.testing.assert_close(a, b)
     assert torch.equal(planes.valid, back.valid)
     with pytest.raises(ValueError, match="another training set"):
-        load_posed_planes(path, data, 0.02)  # another radius
+        reusable_posed_planes(path, data, 0.02)  # another radius
     data.pose[1, 16, 2] += 0.1
     with pytest.raises(ValueError, match="another training set"):
-        load_posed_planes(path, data, 0.013)
+        reusable_posed_planes(path, data, 0.013)
 
 
 def test_the_planes_of_a_set_that_grew_are_kept_for_its_first_sequences(tmp_path: Path) -> None:
@@ -117,7 +119,6 @@ def test_the_planes_of_a_set_that_grew_are_kept_for_its_first_sequences(tmp_path
     regressor --planes`` does so and writes the grown set's planes over the file."""
     from usd_garment.canonical.dataset import concat_canonical_sets
     from usd_garment.cli.train import _posed_planes
-    from usd_garment.training.posed_planes import PLANE_RADIUS, reusable_posed_planes
 
     body, fields = load_body_model(), load_body_fields()
     first = _tshirt_set(2)
@@ -128,7 +129,8 @@ def test_the_planes_of_a_set_that_grew_are_kept_for_its_first_sequences(tmp_path
     save_posed_planes(path, posed_planes(first, body, fields), first, PLANE_RADIUS)
     known, sequences = reusable_posed_planes(path, grown, PLANE_RADIUS)
     assert sequences == 1 and len(known.valid) == 2
-    assert reusable_posed_planes(path, second, PLANE_RADIUS)[1] == 0  # not its beginning
+    with pytest.raises(ValueError, match="another training set"):
+        reusable_posed_planes(path, second, PLANE_RADIUS)  # not its beginning
     fresh = posed_planes(grown, body, fields)
     planes = _posed_planes(grown, body, fields, path)
     for a, b in ((planes.normal, fresh.normal), (planes.offset, fresh.offset)):

@@ -155,30 +155,22 @@ def save_posed_planes(
         )  # fmt: skip
 
 
-def load_posed_planes(path: str | Path, data: CanonicalSet, radius: float) -> PosedPlanes:
-    """The planes saved by :func:`save_posed_planes` for ``data`` and ``radius``.
-
-    Raises:
-        ValueError: the file was made for another set or radius.
-    """
-    planes, sequences = reusable_posed_planes(path, data, radius)
-    if planes is None or sequences < data.num_sequences:
-        raise ValueError(f"{path}: posed planes of another training set (or radius)")
-    return planes
-
-
 def reusable_posed_planes(
     path: str | Path, data: CanonicalSet, radius: float
-) -> tuple[PosedPlanes | None, int]:
+) -> tuple[PosedPlanes, int]:
     """The planes saved by :func:`save_posed_planes` and how many of ``data``'s sequences they
     are for: all of them, or its first K when ``data`` grew from the set they were made for
-    (``project --update`` appends sequences); None and 0 when they are another set's or
-    radius's (their large arrays are then not read)."""
+    (``project --update`` appends sequences).
+
+    Raises:
+        ValueError: the file holds another set's or radius's planes (their large arrays are
+            then not read).
+    """
     with np.load(Path(path)) as f:
         valid = torch.from_numpy(f["valid"])  # the smallest array: its frames tell K
         ends = data.frame_offsets.tolist()
         count = ends.index(len(valid)) if len(valid) in ends[1:] else 0
         if count == 0 or str(f["fingerprint"]) != _fingerprint(data, radius, count):
-            return None, 0
+            raise ValueError(f"{path}: posed planes of another training set (or radius)")
         planes = PosedPlanes(torch.from_numpy(f["normal"]), torch.from_numpy(f["offset"]), valid)
     return planes, count
