@@ -18,6 +18,7 @@ from click.testing import CliRunner
 from pxr import Usd
 from safetensors.torch import load_file, save_file
 from scipy.ndimage import gaussian_filter1d
+from scipy.spatial.transform import Rotation
 
 from tests.models import untrained_model
 from usd_garment.body.io import load_body_model
@@ -222,12 +223,14 @@ def test_the_frames_before_a_cut_are_the_garment_of_the_clip_before_it(tmp_path,
     np.testing.assert_allclose(before, method.predict(walk, body, template), atol=1e-5)
 
 
-def test_a_declared_cut_splits_a_splice_of_the_joints_alone(tmp_path, body, template):
+def test_a_splice_of_the_joints_alone_is_found_or_declared(tmp_path, body, template):
     """A walk whose joints take an arm swing's from frame 22 on while its root walks on (an
-    edit's splice: no root jump, so ``root_cuts`` finds none), at 120 fps: declared in
-    ``smpl:cuts`` (or ``dress --cut``), the frames before it are the walk's dressed alone, as at
-    a found cut; undeclared, both smoothings reach across it. ``dress`` reports the cut and
-    honours the layer's declaration and ``--cut`` alike."""
+    edit's splice: no root jump, so ``root_cuts`` finds none), at 120 fps, is found by
+    ``joint_cuts``: the frames before it are the walk's dressed alone, as at a declared cut. A
+    splice too small to be found (the left shoulder turned 0.3 rad more from frame 22) is cut
+    where it is declared in ``smpl:cuts`` (or ``dress --cut``); undeclared, both smoothings
+    reach across it. ``dress`` reports the cuts and honours the layer's declaration and
+    ``--cut`` alike."""
     _, out, _ = _smoothed(tmp_path, body, template, "latent", "0.1")
     save_learned_model(tmp_path / "both", replace(load_learned_model(out), posed_smoothing=0.05))
     walk = make_motion("walk", 42, 120.0, seed=2, body=body)
@@ -235,24 +238,34 @@ def test_a_declared_cut_splits_a_splice_of_the_joints_alone(tmp_path, body, temp
     pose = walk.pose.copy()
     pose[22:, 1:] = swing.pose[:, 1:]
     spliced = replace(walk, pose=pose)
-    declared = replace(spliced, cut_times=(22.0,))
-    assert root_cuts(spliced) == () and motion_cuts(declared) == (22,)
+    assert root_cuts(spliced) == () and motion_cuts(spliced) == (22,)
     method = SmoothedAlone(tmp_path / "both", exact_fields=True)
     alone = method.predict(replace(walk, pose=pose[:22], trans=walk.trans[:22]), body, template)
+    np.testing.assert_allclose(method.predict(spliced, body, template)[:22], alone, atol=1e-5)
+    small = walk.pose.copy()
+    turn = Rotation.from_rotvec([0.0, 0.0, 0.3]) * Rotation.from_rotvec(small[22:, 16])
+    small[22:, 16] = turn.as_rotvec()
+    nudged = replace(walk, pose=small)
+    declared = replace(nudged, cut_times=(22.0,))
+    assert motion_cuts(nudged) == () and motion_cuts(declared) == (22,)
+    alone = method.predict(replace(walk, pose=small[:22], trans=walk.trans[:22]), body, template)
     np.testing.assert_allclose(method.predict(declared, body, template)[:22], alone, atol=1e-5)
-    across = method.predict(spliced, body, template)[:22]
+    across = method.predict(nudged, body, template)[:22]
     assert np.abs(across - alone)[-3:].max() > 1e-3
-    marked, plain = tmp_path / "marked.usda", tmp_path / "plain.usda"
+    marked, plain, found = (tmp_path / f"{name}.usda" for name in ("marked", "plain", "found"))
     write_body_layer(marked, declared, body)
-    write_body_layer(plain, spliced, body)
+    write_body_layer(plain, nudged, body)
+    write_body_layer(found, spliced, body)
     layers = []
     dress = ["--method", "learned", "--model", tmp_path / "both", "--lod", "low", "--json"]
-    for source, extra in ((marked, []), (plain, ["--cut", "22"]), (plain, [])):
+    runs = ((marked, [], [22.0]), (plain, ["--cut", "22"], [22.0]), (plain, [], []),
+            (found, [], [22.0]))  # fmt: skip
+    for source, extra, cuts in runs:
         layers.append(tmp_path / f"out{len(layers)}.usdc")
         code, output = _run(["dress", source, "-o", layers[-1], *dress, *extra])
         assert code == 0, output
-        assert json.loads(output)["cuts"] == ([] if source == plain and not extra else [22.0])
-    first, second, third = (read_garment_layer(p)[0] for p in layers)
+        assert json.loads(output)["cuts"] == cuts
+    first, second, third = (read_garment_layer(p)[0] for p in layers[:3])
     np.testing.assert_array_equal(first, second)
     assert np.abs(first - third).max() > 1e-4
 

@@ -371,6 +371,46 @@ def test_root_cuts_find_the_stress_suites_jumps_and_nothing_in_real_motion(
     assert root_cuts(SmplMotion(walk.betas, walk.pose[:2], walk.trans[:2], FPS)) == ()
 
 
+def test_joint_cuts_find_splices_of_the_joints_and_nothing_in_real_motion(
+    motions: dict[str, SmplMotion], body_model: BodyModel
+) -> None:
+    """A splice of the joints alone (the root walks on) is a cut where one step of the joints
+    stands out from both beside it: the stress suite's (a walk taking an arm raise's joints
+    half way in) undeclared, and CMU 131_02's joints taking 131_03's from frame 104, at 30 and
+    at 120 frames/s. No procedural motion has one, nor the stress suite's 4x swing (whose steps
+    all stand out alike), the shared captures at either rate, or the noisiest capture here (AMC
+    01_08 at 120 frames/s); a joint thrown out for one frame and back is a glitch, not a cut."""
+    from usd_garment.eval.stress import stress_motions
+    from usd_garment.motion.bvh import load_bvh, read_bvh, retarget
+    from usd_garment.motion.cuts import joint_cuts
+
+    for kind, motion in motions.items():
+        assert joint_cuts(motion) == (), kind
+    stress = stress_motions(body_model)
+    assert joint_cuts(stress["fast_x4"]()) == ()
+    splice = replace(stress["joint_splice"](), cut_times=())
+    assert joint_cuts(splice) == (splice.num_frames // 2,)
+    captures = [
+        retarget(read_bvh(MOCAP / f"cmu_131_0{n}.bvh"), body_model, arm_clearance=0)[0]
+        for n in (2, 3)
+    ]
+    for every in (4, 1):  # 30 and 120 frames/s
+        first, second = (
+            SmplMotion(c.betas, c.pose[::every], c.trans[::every], c.fps / every) for c in captures
+        )
+        assert joint_cuts(first) == joint_cuts(second) == (), every
+        at = 416 // every
+        pose = first.pose.copy()
+        pose[at:, 1:] = second.pose[at : len(pose), 1:]
+        assert joint_cuts(replace(first, pose=pose)) == (at,), every
+    amc, _ = load_bvh(Path("examples/mocap/asf/01_08.amc.xz"), body_model, arm_clearance=0)
+    assert amc.fps == 120.0 and joint_cuts(amc) == ()
+    walk = motions["walk"]
+    glitch = walk.pose.copy()
+    glitch[40, 16] += 1.5  # the left shoulder thrown out for one frame
+    assert joint_cuts(replace(walk, pose=glitch)) == ()
+
+
 def test_declared_cuts_land_on_the_first_frame_at_or_after_their_time_code(
     motions: dict[str, SmplMotion],
 ) -> None:

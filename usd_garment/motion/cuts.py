@@ -1,21 +1,26 @@
 """Cuts in a motion: frames where the root jumps (a teleport, a heading snapped, two clips joined
-end to end), and those the animation declares (``SmplMotion.cut_times``: a splice that changes
-only the joints, which no threshold tells from a fast swing), so that what is smoothed over
-frames is not smoothed across them.
+end to end), where the joints jump in one step that stands out from the steps beside it (a
+splice that changes only the joints), and those the animation declares
+(``SmplMotion.cut_times``: a splice too small to be found), so that what is smoothed over frames
+is not smoothed across them.
 
 Units: metres, radians, frames per second.
 """
 
 from __future__ import annotations
 
+import functools
 import itertools
 from collections.abc import Sequence
 from typing import Literal
 
 import numpy as np
+import torch
 from scipy.ndimage import gaussian_filter1d
 from scipy.spatial.transform import Rotation
 
+from usd_garment.body.io import load_body_model
+from usd_garment.body.joints import SMPL_PARENTS
 from usd_garment.motion.sequence import SmplMotion
 
 #: A root step that differs from both steps beside it by more than this (m) or
@@ -29,15 +34,29 @@ CUT_ROTATION = 0.5
 #: low frame rate a real step may change more than :data:`CUT_DISTANCE` from one to the next.
 CUT_ACCELERATION = 50.0
 CUT_ANGULAR_ACCELERATION = 400.0
+#: A step of the joints (all 23 below the root as one vector of their positions relative to the
+#: pelvis, m) that differs from both steps beside it by at least this much, and by at least
+#: :data:`SPLICE_RATIO` times their difference from each other, where neither step beside it
+#: stands out by more than :data:`SPLICE_NEIGHBOURS` times as much, starts a cut: a splice of
+#: the joints alone. Stop 84 fixed the three by a rule before a held-out check
+#: (docs/judge.md): on the splices it was fixed on such a step stands out by 0.45-2.47 m, 2.8-30
+#: times the change across it, its neighbours by at most 0.09 times as much; a fast swing's
+#: steps all stand out alike (the stress suite's 4x swing: 0.48 m, 1.2 times), and the glitches
+#: of the noisiest capture (AMC 01_08 at 120 fps: up to 0.69 m) come with a neighbour that
+#: stands out by at least 0.11 times as much wherever they stand out by more than 0.2 m.
+SPLICE_JUMP = 0.30
+SPLICE_RATIO = 2.0
+SPLICE_NEIGHBOURS = 0.25
 
 
 def motion_cuts(motion: SmplMotion) -> tuple[int, ...]:
     """The frames ``k`` (0 < k < T, increasing) where ``motion`` starts anew: its
-    :func:`root_cuts` and its declared ``cut_times``, each at the first frame whose time code is
-    at or after it (declared times at or before the first frame, or after the last, cut
-    nothing)."""
+    :func:`root_cuts`, its :func:`joint_cuts` and its declared ``cut_times``, each at the first
+    frame whose time code is at or after it (declared times at or before the first frame, or
+    after the last, cut nothing)."""
     declared = np.searchsorted(motion.time_codes, np.asarray(motion.cut_times, dtype=np.float64))
-    found = set(root_cuts(motion)) | {int(k) for k in declared if 0 < k < motion.num_frames}
+    found = set(root_cuts(motion)) | set(joint_cuts(motion))
+    found |= {int(k) for k in declared if 0 < k < motion.num_frames}
     return tuple(sorted(found))
 
 
@@ -54,6 +73,54 @@ def root_cuts(motion: SmplMotion) -> tuple[int, ...]:
     cut = _outliers(move, max(CUT_DISTANCE, CUT_ACCELERATION * dt2))
     cut |= _outliers(turn, max(CUT_ROTATION, CUT_ANGULAR_ACCELERATION * dt2))
     return tuple(int(k) + 1 for k in np.flatnonzero(cut))
+
+
+def joint_cuts(motion: SmplMotion) -> tuple[int, ...]:
+    """The frames ``k`` (2 ≤ k ≤ T − 2) where ``motion``'s joints jump: the step of
+    :func:`relative_joints` into frame k differs from each step beside it by at least
+    :data:`SPLICE_JUMP` (m) and :data:`SPLICE_RATIO` times their difference from each other,
+    and neither step beside it stands out by more than :data:`SPLICE_NEIGHBOURS` times as
+    much. Independent of the frame rate: a splice's jump is the same at any rate, where a real
+    step's change shrinks with the square of the frame time."""
+    if motion.num_frames < 4:
+        return ()
+    steps = np.diff(relative_joints(motion).reshape(motion.num_frames, -1), axis=0)  # (T-1, 69)
+    inner = steps[1:-1]  # the steps into frames 2 .. T-2
+    stand_out = np.minimum(
+        np.linalg.norm(inner - steps[:-2], axis=1), np.linalg.norm(inner - steps[2:], axis=1)
+    )  # (T-3,)
+    across = np.linalg.norm(steps[2:] - steps[:-2], axis=1)
+    beside = np.maximum(np.r_[0.0, stand_out[:-1]], np.r_[stand_out[1:], 0.0])
+    cut = (stand_out >= SPLICE_JUMP) & (stand_out >= SPLICE_RATIO * across)
+    cut &= beside <= SPLICE_NEIGHBOURS * stand_out
+    return tuple(int(k) + 2 for k in np.flatnonzero(cut))
+
+
+def relative_joints(motion: SmplMotion) -> np.ndarray:
+    """``(T, 23, 3)``: the positions (m) of ``motion``'s joints below the root relative to the
+    pelvis, with the pelvis's own rotation left out, on the embedded default body's rest
+    skeleton (a jump of the joints shows on any plausible skeleton)."""
+    rotations = Rotation.from_rotvec(motion.pose.reshape(-1, 3).astype(np.float64))
+    local = rotations.as_matrix().reshape(motion.num_frames, -1, 3, 3)
+    bones = _rest_bones()
+    world = [np.broadcast_to(np.eye(3), (motion.num_frames, 3, 3))]
+    position = [np.zeros((motion.num_frames, 3))]
+    for joint in range(1, len(SMPL_PARENTS)):
+        parent = SMPL_PARENTS[joint]
+        position.append(position[parent] + world[parent] @ bones[joint])
+        world.append(world[parent] @ local[:, joint])
+    return np.stack(position[1:], axis=1)
+
+
+@functools.lru_cache(maxsize=1)
+def _rest_bones() -> np.ndarray:
+    """``(24, 3)``: each joint's offset (m) from its parent in the embedded default body's rest
+    pose (row 0: the root, unused)."""
+    with torch.no_grad():
+        _, joints = load_body_model().shaped(torch.zeros(1, 10))
+    rest = joints[0].double().numpy()
+    parents = np.asarray(SMPL_PARENTS[1:])
+    return np.concatenate([rest[:1], rest[1:] - rest[parents]])
 
 
 def _outliers(steps: np.ndarray, limit: float) -> np.ndarray:
