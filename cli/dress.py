@@ -69,10 +69,10 @@ QUALITY_LODS = {"draft": "low", "final": "high"}
     type=float,
     multiple=True,
     metavar="TIME",
-    help="A time code where the animation starts anew (repeat): an edit's splice that changes "
-    "only the joints, which the garment would otherwise be smoothed across. Added to the "
-    "skeleton's smpl:cuts; cuts where the root jumps are found without it. Times outside the "
-    "dressed frames cut nothing.",
+    help="A time code where the animation starts anew (repeat): an edit's splice too small to "
+    "be found, which the garment would otherwise be smoothed across. Added to the skeleton's "
+    "smpl:cuts; cuts where the root jumps, or the joints jump in one step that stands out, are "
+    "found without it. Times outside the dressed frames cut nothing.",
 )
 @click.option(
     "--root-layer",

@@ -105,7 +105,7 @@ def dress(
         skeleton: Skeleton prim path when the stage has several.
         betas: ``(≤16,)`` shape coefficients overriding the stage's ``smpl:betas``.
         cuts: time codes where the animation starts anew, besides the stage's ``smpl:cuts``
-            (a splice that changes only the joints; cuts where the root jumps are found).
+            (a splice too small to be found; cuts where the root or the joints jump are found).
         root_layer: also write a layer that sublayers the garment layer and the input.
         template: a ready template (tests, benchmarks); skips loading one.
         clip_threshold: frames × vertices above which the layer uses value clips.

@@ -76,9 +76,9 @@ def evaluate_layer(
     selected one) on the body of ``body_input``; against a ``reference`` layer of another
     level of detail of the same garment, the reference is carried to the garment's level of
     detail first (:mod:`usd_garment.garment.lod`); no acceleration is measured across the body's
-    cuts (``motion_cuts``: a teleport, a snapped heading, a splice the body layer's
-    ``smpl:cuts`` declares). ``pool``: worker processes that measure blocks of frames (the same
-    figures).
+    cuts (``motion_cuts``: a teleport, a snapped heading, a splice of the joints, one the body
+    layer's ``smpl:cuts`` declares). ``pool``: worker processes that measure blocks of frames
+    (the same figures).
 
     Returns:
         The metrics and the ``(T,)`` time codes they refer to.

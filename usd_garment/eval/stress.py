@@ -1,9 +1,9 @@
 """The stress suite's inputs: animated bodies where garment methods are known to fail: extreme
 shapes (β₁ at ±3σ), motion played 2 and 4 times faster, a very long sequence, poses with
 self-contact (forearms folded before the chest, wrists meeting at the midline; hands on the
-hips), sudden root jumps, a splice of the joints alone (its cut declared, as an edit would), and
-real captures. Each is written as a body layer, as a user would
-bring it."""
+hips), sudden root jumps, a splice of the joints alone (its cut declared, as an edit would;
+found without it since stop 84), and real captures. Each is written as a body layer, as a user
+would bring it."""
 
 from __future__ import annotations
 

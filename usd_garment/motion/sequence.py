@@ -22,8 +22,8 @@ class SmplMotion:
         model: the body model name the betas belong to.
         cut_times: time codes where the animation is declared to start anew (an edit's splice;
             ``smpl:cuts`` of the layer, ``dress --cut``): nothing is smoothed or differentiated
-            across them. Cuts where the root jumps are also found from the motion itself
-            (:func:`~usd_garment.motion.cuts.motion_cuts`).
+            across them. Cuts where the root or the joints jump are also found from the motion
+            itself (:func:`~usd_garment.motion.cuts.motion_cuts`).
     """
 
     betas: np.ndarray
