@@ -21,6 +21,7 @@ from scipy.spatial.transform import Rotation
 
 from usd_garment.body.io import load_body_model
 from usd_garment.body.joints import SMPL_PARENTS
+from usd_garment.body.lbs import batch_rigid_transform, batch_rodrigues
 from usd_garment.motion.sequence import SmplMotion
 
 #: A root step that differs from both steps beside it by more than this (m) or
@@ -99,28 +100,21 @@ def joint_cuts(motion: SmplMotion) -> tuple[int, ...]:
 def relative_joints(motion: SmplMotion) -> np.ndarray:
     """``(T, 23, 3)``: the positions (m) of ``motion``'s joints below the root relative to the
     pelvis, with the pelvis's own rotation left out, on the embedded default body's rest
-    skeleton (a jump of the joints shows on any plausible skeleton)."""
-    rotations = Rotation.from_rotvec(motion.pose.reshape(-1, 3).astype(np.float64))
-    local = rotations.as_matrix().reshape(motion.num_frames, -1, 3, 3)
-    bones = _rest_bones()
-    world = [np.broadcast_to(np.eye(3), (motion.num_frames, 3, 3))]
-    position = [np.zeros((motion.num_frames, 3))]
-    for joint in range(1, len(SMPL_PARENTS)):
-        parent = SMPL_PARENTS[joint]
-        position.append(position[parent] + world[parent] @ bones[joint])
-        world.append(world[parent] @ local[:, joint])
-    return np.stack(position[1:], axis=1)
+    skeleton (a jump of the joints shows on any plausible skeleton); in float64."""
+    pose = torch.from_numpy(motion.pose.astype(np.float64))
+    pose[:, 0] = 0.0
+    rotations = batch_rodrigues(pose.reshape(-1, 3)).reshape(motion.num_frames, -1, 3, 3)
+    rest = _rest_joints().expand(motion.num_frames, -1, -1)
+    joints, _ = batch_rigid_transform(rotations, rest, SMPL_PARENTS)
+    return (joints[:, 1:] - joints[:, :1]).numpy()
 
 
 @functools.lru_cache(maxsize=1)
-def _rest_bones() -> np.ndarray:
-    """``(24, 3)``: each joint's offset (m) from its parent in the embedded default body's rest
-    pose (row 0: the root, unused)."""
+def _rest_joints() -> torch.Tensor:
+    """``(1, 24, 3)`` float64: the embedded default body's rest joints (m)."""
     with torch.no_grad():
         _, joints = load_body_model().shaped(torch.zeros(1, 10))
-    rest = joints[0].double().numpy()
-    parents = np.asarray(SMPL_PARENTS[1:])
-    return np.concatenate([rest[:1], rest[1:] - rest[parents]])
+    return joints.double()
 
 
 def _outliers(steps: np.ndarray, limit: float) -> np.ndarray:
