@@ -28,7 +28,7 @@ from usd_garment.garment.library import load_template
 from usd_garment.garment.template import GarmentTemplate
 from usd_garment.methods.learned import LearnedMethod, predict_latents
 from usd_garment.methods.learned_model import ModelError, load_learned_model, save_learned_model
-from usd_garment.motion.cuts import motion_cuts, root_cuts
+from usd_garment.motion.cuts import motion_cuts, motion_restarts, root_cuts
 from usd_garment.motion.procedural import make_motion
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.usd.body_layer import write_body_layer
@@ -221,6 +221,36 @@ def test_the_frames_before_a_cut_are_the_garment_of_the_clip_before_it(tmp_path,
     method = SmoothedAlone(tmp_path / "both", exact_fields=True)
     before = method.predict(joined, body, template)[:22]
     np.testing.assert_allclose(before, method.predict(walk, body, template), atol=1e-5)
+
+
+def test_the_frames_from_a_cut_on_are_the_garment_of_the_clip_after_it(tmp_path, body, template):
+    """A walk, then an arm swing 1 m away (a cut at frame 20, 30 fps), dressed by a model with
+    both smoothings: from the cut on, the frames are the swing's dressed alone, its GRU started
+    from rest there as at a clip's first frame; the state the walk left is not carried over. A
+    jump of the root alone (the walk moved 1 m from frame 10) is a cut but not a restart: the
+    state carries across it."""
+    _, out, _ = _smoothed(tmp_path, body, template, "latent", "0.1")
+    save_learned_model(tmp_path / "both", replace(load_learned_model(out), posed_smoothing=0.05))
+    walk = make_motion("walk", 20, 30.0, seed=2, body=body)
+    swing = make_motion("arm_swing", 20, 30.0, seed=3, body=body)
+    moved = replace(swing, betas=walk.betas, trans=swing.trans + np.array([1.0, 0.0, 0.0]))
+    pose = np.concatenate([walk.pose, moved.pose])
+    joined = replace(walk, pose=pose, trans=np.concatenate([walk.trans, moved.trans]))
+    assert root_cuts(joined) == (20,) and motion_restarts(joined) == (20,)
+    model = load_learned_model(tmp_path / "both", body)
+    torch.testing.assert_close(predict_latents(model, joined)[20:], predict_latents(model, moved))
+    method = SmoothedAlone(tmp_path / "both", exact_fields=True)
+    after = method.predict(joined, body, template)[20:]
+    np.testing.assert_allclose(after, method.predict(moved, body, template), atol=1e-5)
+    trans = walk.trans.copy()
+    trans[10:, 0] += 1.0  # a jump of the root alone: the same walk going on, moved
+    jumped = replace(walk, trans=trans)
+    assert root_cuts(jumped) == (10,) and motion_restarts(jumped) == ()
+    carried = predict_latents(model, jumped)
+    torch.testing.assert_close(carried, predict_latents(model, jumped, restarts=()))
+    anew = predict_latents(model, jumped, restarts=(10,))
+    torch.testing.assert_close(carried[:10], anew[:10])
+    assert (carried[10:] - anew[10:]).abs().max() > 1e-3
 
 
 def test_a_splice_of_the_joints_alone_is_found_or_declared(tmp_path, body, template):

@@ -214,6 +214,21 @@ def test_gru_streaming_equals_whole_sequence() -> None:
     torch.testing.assert_close(model.predict(gamma[1], betas[1], chunk=4), whole[1])
 
 
+def test_gru_starts_from_rest_at_each_restart() -> None:
+    """With restarts, each run between them gets the codes it gets alone (the GRU from rest, as
+    at a training crop's first frame), chunked or not; without them the state runs on."""
+    torch.manual_seed(0)
+    model = GarmentRegressor(42, hidden=(16, 12), latent_size=25).eval()
+    gamma, betas = torch.randn(30, 42), torch.randn(10)
+    cut = model.predict(gamma, betas, chunk=4, restarts=(9, 20))
+    alone = [model.predict(gamma[a:b], betas) for a, b in ((0, 9), (9, 20), (20, 30))]
+    torch.testing.assert_close(cut, torch.cat(alone), rtol=1e-5, atol=1e-6)
+    torch.testing.assert_close(model.predict(gamma, betas, restarts=(9, 20)), cut)
+    across = model.predict(gamma, betas)
+    torch.testing.assert_close(across[:9], cut[:9])
+    assert (across[9] - cut[9]).abs().max() > 1e-3
+
+
 def test_configs_round_trip() -> None:
     codec = PoseCodec(hidden=48, code_size=7)
     again = PoseCodec.from_config(json.loads(json.dumps(codec.config())))

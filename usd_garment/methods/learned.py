@@ -40,7 +40,12 @@ from usd_garment.garment.lod import carry_to_lod
 from usd_garment.garment.model import GarmentModel
 from usd_garment.garment.template import LODS, GarmentTemplate
 from usd_garment.methods.base import Progress, predict_chunks
-from usd_garment.methods.learned_model import LearnedModel, ModelError, load_learned_model
+from usd_garment.methods.learned_model import (
+    LearnedModel,
+    Member,
+    ModelError,
+    load_learned_model,
+)
 from usd_garment.methods.learned_posing import (
     PosingPool,
     Smoothing,
@@ -48,8 +53,8 @@ from usd_garment.methods.learned_posing import (
     can_fork,
     pose_chunk,
 )
-from usd_garment.motion.cuts import motion_cuts, smooth_runs
-from usd_garment.motion.resample import cut_at
+from usd_garment.motion.cuts import motion_cuts, motion_restarts, smooth_runs
+from usd_garment.motion.resample import cut_at, resampled_cuts
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.regressor.descriptor import MODEL_FPS, at_model_rate, motion_descriptor
 
@@ -121,26 +126,37 @@ def learned_method(name: str, model: str | Path | None = None) -> LearnedMethod:
 
 @torch.no_grad()
 def predict_latents(
-    model: LearnedModel, motion: SmplMotion, cuts: Sequence[int] | None = None
+    model: LearnedModel,
+    motion: SmplMotion,
+    cuts: Sequence[int] | None = None,
+    restarts: Sequence[int] | None = None,
 ) -> torch.Tensor:
     """The regressors' latent codes ``(T, ΣL_m)`` for the frames of ``motion``, the members'
     side by side: each member's motion descriptor γ at the model's 30 fps (the motion resampled
-    once, ``at_model_rate``; each run between its cuts on its own), its GRU, the codes smoothed in
-    time when the model says so (a Gaussian of ``model.latent_smoothing`` seconds, reflected at
-    the ends and at each cut), then interpolated back to the motion's frames (:func:`to_frames`).
-    ``cuts``: the motion's :func:`motion_cuts`, where the caller has them (None: found here).
+    once, ``at_model_rate``; each run between its cuts on its own), its GRU (from rest at the
+    start and again at each restart, its state carried across a jump of the root alone), the
+    codes smoothed in time when the model says so (a Gaussian of ``model.latent_smoothing``
+    seconds, reflected at the ends and at each cut), then interpolated back to the motion's
+    frames (:func:`to_frames`). ``cuts`` and ``restarts``: the motion's :func:`motion_cuts` and
+    :func:`motion_restarts`, where the caller has them (None: found here).
 
     The members' GRUs run in threads: a recurrence is a chain of small matrix products that
     keeps one core busy, so on two cores three members take about half the time."""
     betas = torch.as_tensor(motion.betas, dtype=torch.float32)
-    cuts = motion_cuts(motion) if cuts is None else cuts
+    restarts = motion_restarts(motion) if restarts is None else restarts
+    cuts = motion_cuts(motion, restarts) if cuts is None else cuts
     resampled, at_30 = at_model_rate(motion, cuts)  # once for every member
+    starts = resampled_cuts(restarts, motion.fps, MODEL_FPS, resampled.num_frames)
     gammas = [
         motion_descriptor(resampled.pose, resampled.trans, member.pose_codec, cuts=at_30)
         for member in model.members
     ]
+
+    def codes_of(member: Member, gamma: torch.Tensor) -> torch.Tensor:
+        return member.regressor.predict(gamma, betas, restarts=starts)
+
     with ThreadPoolExecutor(len(model.members)) as pool:
-        codes = list(pool.map(lambda m, g: m.regressor.predict(g, betas), model.members, gammas))
+        codes = list(pool.map(codes_of, model.members, gammas))
     z = torch.cat(codes, dim=1)
     if model.latent_smoothing > 0 and len(z) > 1:
         sigma = model.latent_smoothing * MODEL_FPS
@@ -358,8 +374,9 @@ class LearnedMethod:
         t_frames = motion.num_frames
         tangents: list[Tangent] = []  # the last one is kept across chunks (_tangents)
         lap("load")
-        cuts = motion_cuts(motion)  # the regressor's and the smoothing's
-        z = predict_latents(model, motion, cuts)
+        restarts = motion_restarts(motion)  # the regressor's
+        cuts = motion_cuts(motion, restarts)  # the regressor's and the smoothing's
+        z = predict_latents(model, motion, cuts, restarts)
         smoothing = Smoothing.of(self.posed_smoothing(model), motion.fps, cuts)
         lap("regressor")
         posing = self._posing_pool(garment_model, betas, boxes, -(-t_frames // chunk))

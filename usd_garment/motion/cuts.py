@@ -50,13 +50,22 @@ SPLICE_RATIO = 2.0
 SPLICE_NEIGHBOURS = 0.25
 
 
-def motion_cuts(motion: SmplMotion) -> tuple[int, ...]:
+def motion_cuts(motion: SmplMotion, restarts: Sequence[int] | None = None) -> tuple[int, ...]:
     """The frames ``k`` (0 < k < T, increasing) where ``motion`` starts anew: its
-    :func:`root_cuts`, its :func:`joint_cuts` and its declared ``cut_times``, each at the first
-    frame whose time code is at or after it (declared times at or before the first frame, or
-    after the last, cut nothing)."""
+    :func:`root_cuts` and its :func:`motion_restarts` (``restarts``, where the caller has
+    them; None: found here)."""
+    restarts = motion_restarts(motion) if restarts is None else restarts
+    return tuple(sorted(set(root_cuts(motion)) | set(restarts)))
+
+
+def motion_restarts(motion: SmplMotion) -> tuple[int, ...]:
+    """The cuts (0 < k < T, increasing) where another motion starts, not the same one moved:
+    its :func:`joint_cuts` and its declared ``cut_times``, each at the first frame whose time
+    code is at or after it (declared times at or before the first frame, or after the last, cut
+    nothing). A jump of the root alone (:func:`root_cuts` only) moves a motion that goes on: a
+    regressor's state carries across it, and starts from rest at a restart."""
     declared = np.searchsorted(motion.time_codes, np.asarray(motion.cut_times, dtype=np.float64))
-    found = set(root_cuts(motion)) | set(joint_cuts(motion))
+    found = set(joint_cuts(motion))
     found |= {int(k) for k in declared if 0 < k < motion.num_frames}
     return tuple(sorted(found))
 

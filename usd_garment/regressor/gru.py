@@ -4,6 +4,8 @@ hidden state from frame to frame so the garment gets dynamics."""
 
 from __future__ import annotations
 
+import itertools
+from collections.abc import Sequence
 from typing import Any
 
 import torch
@@ -103,23 +105,34 @@ class GarmentRegressor(torch.nn.Module):
         return z, tuple(new_state)
 
     @torch.no_grad()
-    def predict(self, gamma: torch.Tensor, betas: torch.Tensor, chunk: int = 1024) -> torch.Tensor:
+    def predict(
+        self,
+        gamma: torch.Tensor,
+        betas: torch.Tensor,
+        chunk: int = 1024,
+        restarts: Sequence[int] = (),
+    ) -> torch.Tensor:
         """Latent codes ``(T, latent_size)`` of one whole motion, from rest, ``chunk`` frames at
-        a time (no gradients).
+        a time (no gradients). At each of ``restarts`` another motion starts and the GRU starts
+        from rest again, as at a training crop's first frame: each run between them gets the
+        codes it gets alone.
 
         Args:
             gamma: ``(T, descriptor_size)`` motion descriptor.
             betas: ``(betas_size,)`` body shape.
             chunk: frames per GRU call (bounds the memory of long sequences).
+            restarts: frames (0 < k < T, increasing) where another motion starts
+                (``motion_restarts``).
         """
         device = self.output.weight.device
         gamma = torch.as_tensor(gamma, dtype=torch.float32, device=device)
         betas = torch.as_tensor(betas, dtype=torch.float32, device=device)[None]
-        state: State | None = None
         out: list[torch.Tensor] = []
-        for part in gamma.split(max(1, int(chunk))):
-            z, state = self(part[None], betas, state)
-            out.append(z[0])
+        for a, b in itertools.pairwise((0, *restarts, len(gamma))):
+            state: State | None = None
+            for part in gamma[a:b].split(max(1, int(chunk))):
+                z, state = self(part[None], betas, state)
+                out.append(z[0])
         if not out:
             return gamma.new_zeros((0, self.latent_size))
         return torch.cat(out)
