@@ -70,7 +70,8 @@ QUALITY_LODS = {"draft": "low", "final": "high"}
     multiple=True,
     metavar="TIME",
     help="A time code where the animation starts anew (repeat): an edit's splice too small to "
-    "be found, which the garment would otherwise be smoothed across. Added to the skeleton's "
+    "be found, which the garment would otherwise be smoothed across, its dynamics started from "
+    "rest there. Added to the skeleton's "
     "smpl:cuts; cuts where the root jumps, or the joints jump in one step that stands out, are "
     "found without it. Times outside the dressed frames cut nothing.",
 )
