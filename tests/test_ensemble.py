@@ -186,23 +186,31 @@ def test_latent_smoothing_is_a_gaussian_over_the_codes_at_30_fps(tmp_path, body,
     _kept_and_checked(tmp_path, out, info, "latent", -0.5)
 
 
-def test_latent_smoothing_stops_at_the_cuts(tmp_path, body, template):
-    """A motion whose root teleports 0.5 m at frame 20 (a cut, ``root_cuts``): the codes of
-    each side are smoothed on their own, mirrored at the cut as at the ends, so that no frame
-    takes the codes of the other side."""
+def test_latent_smoothing_stops_at_restarts_and_goes_on_across_a_root_jump(
+    tmp_path, body, template
+):
+    """A walk cut at frame 20 where another motion starts (declared in ``cut_times``, a
+    restart): the codes of each side are smoothed on their own, mirrored at the cut as at the
+    ends, so that no frame takes the codes of the other side. The same walk whose root
+    teleports 0.5 m at frame 20 (a cut, ``root_cuts``, but one motion going on, whose codes see
+    no offset): smoothed across, as a walk without the jump."""
     _, out, _ = _smoothed(tmp_path, body, template, "latent", "0.1")
     smoothed = load_learned_model(out, body)
     plain = replace(smoothed, latent_smoothing=0.0)
     motion = make_motion("walk", 40, 30.0, seed=2, body=body)
-    trans = motion.trans.copy()
-    trans[20:, 0] += 0.5
-    jumped = replace(motion, trans=trans)
-    assert root_cuts(jumped) == (20,)
-    z, raw = predict_latents(smoothed, jumped).numpy(), predict_latents(plain, jumped).numpy()
+    declared = replace(motion, cut_times=(float(motion.time_codes[20]),))
+    assert motion_restarts(declared) == (20,)
+    z, raw = predict_latents(smoothed, declared).numpy(), predict_latents(plain, declared).numpy()
     runs = [gaussian_filter1d(raw[a:b], 3.0, axis=0, mode="mirror") for a, b in ((0, 20), (20, 40))]
     np.testing.assert_allclose(z, np.concatenate(runs), atol=1e-6)
     across = gaussian_filter1d(raw, 3.0, axis=0, mode="mirror")
     assert np.abs(across - z)[17:23].max() > 10 * np.abs(across - z)[:10].max()
+    trans = motion.trans.copy()
+    trans[20:, 0] += 0.5
+    jumped = replace(motion, trans=trans)
+    assert root_cuts(jumped) == (20,) and motion_restarts(jumped) == ()
+    z, raw = predict_latents(smoothed, jumped).numpy(), predict_latents(plain, jumped).numpy()
+    np.testing.assert_allclose(z, gaussian_filter1d(raw, 3.0, axis=0, mode="mirror"), atol=1e-6)
 
 
 def test_the_frames_before_a_cut_are_the_garment_of_the_clip_before_it(tmp_path, body, template):
@@ -246,9 +254,10 @@ def test_the_frames_from_a_cut_on_are_the_garment_of_the_clip_after_it(tmp_path,
     trans[10:, 0] += 1.0  # a jump of the root alone: the same walk going on, moved
     jumped = replace(walk, trans=trans)
     assert root_cuts(jumped) == (10,) and motion_restarts(jumped) == ()
-    carried = predict_latents(model, jumped)
-    torch.testing.assert_close(carried, predict_latents(model, jumped, restarts=()))
-    anew = predict_latents(model, jumped, restarts=(10,))
+    plain = replace(model, latent_smoothing=0.0)  # the GRU alone
+    carried = predict_latents(plain, jumped)
+    torch.testing.assert_close(carried, predict_latents(plain, jumped, restarts=()))
+    anew = predict_latents(plain, jumped, restarts=(10,))
     torch.testing.assert_close(carried[:10], anew[:10])
     assert (carried[10:] - anew[10:]).abs().max() > 1e-3
 

@@ -136,7 +136,8 @@ def predict_latents(
     once, ``at_model_rate``; each run between its cuts on its own), its GRU (from rest at the
     start and again at each restart, its state carried across a jump of the root alone), the
     codes smoothed in time when the model says so (a Gaussian of ``model.latent_smoothing``
-    seconds, reflected at the ends and at each cut), then interpolated back to the motion's
+    seconds, reflected at the ends and at each restart; across a jump of the root alone the
+    codes, which see no heading or offset, go on), then interpolated back to the motion's
     frames (:func:`to_frames`). ``cuts`` and ``restarts``: the motion's :func:`motion_cuts` and
     :func:`motion_restarts`, where the caller has them (None: found here).
 
@@ -160,7 +161,7 @@ def predict_latents(
     z = torch.cat(codes, dim=1)
     if model.latent_smoothing > 0 and len(z) > 1:
         sigma = model.latent_smoothing * MODEL_FPS
-        smoothed = smooth_runs(z.cpu().numpy(), sigma, at_30, mode="mirror")
+        smoothed = smooth_runs(z.cpu().numpy(), sigma, starts, mode="mirror")
         z = torch.from_numpy(smoothed).to(z.device)
     return to_frames(z, motion.fps, motion.num_frames, cuts)
 
