@@ -225,7 +225,7 @@ def test_the_frames_before_a_cut_are_the_garment_of_the_clip_before_it(tmp_path,
     pose = np.concatenate([walk.pose, swing.pose])
     trans = np.concatenate([walk.trans, swing.trans + np.array([1.0, 0.0, 0.0])])
     joined = SmplMotion(walk.betas, pose, trans, 120.0, model=walk.model)
-    assert root_cuts(joined) == (22,)
+    assert root_cuts(joined) == (22,) and motion_restarts(joined) == (22,)
     method = SmoothedAlone(tmp_path / "both", exact_fields=True)
     before = method.predict(joined, body, template)[:22]
     np.testing.assert_allclose(before, method.predict(walk, body, template), atol=1e-5)

@@ -136,10 +136,11 @@ def predict_latents(
     once, ``at_model_rate``; each run between its cuts on its own), its GRU (from rest at the
     start and again at each restart, its state carried across a jump of the root alone), the
     codes smoothed in time when the model says so (a Gaussian of ``model.latent_smoothing``
-    seconds, reflected at the ends and at each restart; across a jump of the root alone the
-    codes, which see no heading or offset, go on), then interpolated back to the motion's
-    frames (:func:`to_frames`). ``cuts`` and ``restarts``: the motion's :func:`motion_cuts` and
-    :func:`motion_restarts`, where the caller has them (None: found here).
+    seconds, reflected at the ends and at each restart), then interpolated back to the motion's
+    frames (:func:`to_frames`, not across a restart). Across a jump of the root alone the codes,
+    which see no heading or offset, go on: smoothed and interpolated across it. ``cuts`` and
+    ``restarts``: the motion's :func:`motion_cuts` and :func:`motion_restarts`, where the
+    caller has them (None: found here).
 
     The members' GRUs run in threads: a recurrence is a chain of small matrix products that
     keeps one core busy, so on two cores three members take about half the time."""
@@ -163,7 +164,7 @@ def predict_latents(
         sigma = model.latent_smoothing * MODEL_FPS
         smoothed = smooth_runs(z.cpu().numpy(), sigma, starts, mode="mirror")
         z = torch.from_numpy(smoothed).to(z.device)
-    return to_frames(z, motion.fps, motion.num_frames, cuts)
+    return to_frames(z, motion.fps, motion.num_frames, restarts)
 
 
 def to_frames(
