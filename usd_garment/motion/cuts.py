@@ -2,7 +2,9 @@
 end to end), where the joints jump in one step that stands out from the steps beside it (a
 splice that changes only the joints), and those the animation declares
 (``SmplMotion.cut_times``: a splice too small to be found), so that what is smoothed over frames
-is not smoothed across them.
+is not smoothed across them. The splices and the declared cuts are also restarts, where another
+motion starts: a regressor's state starts from rest there, while across a jump of the root alone
+the motion goes on, moved.
 
 Units: metres, radians, frames per second.
 """
