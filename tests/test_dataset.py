@@ -4,8 +4,10 @@ with a manifest, resuming without redoing finished sequences, bad sequences mark
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
 import lzma
+import math
 import os
 import pickle
 import signal
@@ -465,6 +467,55 @@ def test_the_data_script_takes_the_collars(
     assert len(kinds) == 4 + len(sets)
     assert all(a[a.index("--collars") + 1] == "rest" for a in kinds)
     assert _sets_made_as_committed(calls, garment, suffix) == sets
+
+
+def test_the_cap35_data_script_makes_stop_81s_set(tmp_path: Path) -> None:
+    """``examples/train/data_cap35.sh tshirt OUT BASE`` imports the 35 captures of
+    ``examples/mocap/cmu35`` whole (the importer leaves the T-pose out: 5,321 frames at 30 fps,
+    as the mocap README says), each the file its README lists by SHA-256, makes the train-only
+    set cap35 of them with cmu4's settings (its committed rest manifest's), and projects it onto
+    copies of BASE's two canonical sets."""
+    from usd_garment.cli.dataset import make
+
+    base = tmp_path / "base"
+    base.mkdir()
+    for name in ("v4c", "v4cs"):
+        (base / f"canonical_tshirt_{name}.npz").write_text(name)
+    calls = script_calls("data_cap35.sh", "tshirt", "scratch/c35", str(base), tmp_path=tmp_path)
+    imports = [a for a in calls if a[0] == "import-bvh"]
+    assert all(a[a.index("--collars") + 1] == "rest" and "--frames" not in a for a in imports)
+    readme = (MANIFESTS.parent.parent / "examples" / "mocap" / "README.md").read_text()
+    listed = {}  # name → (SHA-256, frames in the file)
+    for line in readme.split("## Thirty-five captures")[1].splitlines():
+        parts = line.split()
+        if len(parts) == 3 and parts[1].endswith(".bvh"):
+            listed[parts[1]] = (parts[0], int(parts[2]))
+    assert len(listed) == 35
+    seen, frames = [], 0
+    for a in imports:
+        text = lzma.decompress((tmp_path / "work" / a[1]).read_bytes())
+        name = Path(a[1]).name.removeprefix("cmu_").removesuffix(".xz")
+        count = int(text.split(b"Frames:", 1)[1].split(maxsplit=1)[0])
+        assert listed[name] == (hashlib.sha256(text).hexdigest(), count), name
+        seen.append(name)
+        frames += math.ceil((count - 1) / 4)  # frames 1 to the last, 120 fps to 30
+    assert sorted(seen) == sorted(listed) and frames == 5321
+    (make_args,) = [a for a in calls if a[:2] == ["dataset", "make"]]
+    params = make.make_context("make", make_args[2:]).params
+    cmu4 = json.loads((MANIFESTS / "tshirt_cmu4_rest_stop55_manifest.json").read_text())
+    keys = ("garment", "motions", "shapes", "frames", "seed", "shape_sigma", "train_only",
+            "open_shoulders", "capture_shapes", "lod", "substeps", "iterations")  # fmt: skip
+    for key in (*keys, "collars"):
+        assert params[key] == cmu4["config"][key], key
+    assert params["output"].name == "dataset_tshirt_cap35"
+    assert params["captures"] == tuple(f"{a[a.index('-o') + 1]}:train" for a in imports)
+    assert _projections(calls) == [
+        ("scratch/c35/dataset_tshirt_cap35", f"scratch/c35/canonical_tshirt_{n}.npz")
+        for n in ("v4c", "v4cs")
+    ]
+    for name in ("v4c", "v4cs"):
+        copy = tmp_path / "work" / "scratch" / "c35" / f"canonical_tshirt_{name}.npz"
+        assert copy.read_text() == name  # BASE's file, copied before the projection
 
 
 def test_the_arms_data_script_makes_the_committed_sets(tmp_path: Path) -> None:

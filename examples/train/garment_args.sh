@@ -1,6 +1,6 @@
-# Sourced by data_amc.sh and data_arms.sh with their arguments GARMENT OUT [BASE]: sets those
-# three (BASE: scratch/rest by default) and LAST, the regressor set whose copy a capture set is
-# projected onto (v4cs for the T-shirt, v4css for the dress).
+# Sourced by data_amc.sh, data_arms.sh and data_cap35.sh with their arguments GARMENT OUT [BASE]:
+# sets those three (BASE: scratch/rest by default) and LAST, the regressor set whose copy a
+# capture set is projected onto (v4cs for the T-shirt, v4css for the dress).
 NAME=$(basename "$0")
 GARMENT=${1:?usage: $NAME tshirt|dress OUT [BASE]}
 OUT=${2:?usage: $NAME tshirt|dress OUT [BASE]}

@@ -1,5 +1,5 @@
-# Sourced by data.sh, data_amc.sh and data_arms.sh once GARMENT, OUT and COLLARS are set: the two
-# steps each of them repeats with the training sets' common settings.
+# Sourced by data.sh, data_amc.sh, data_arms.sh and data_cap35.sh once GARMENT, OUT and COLLARS
+# are set: the two steps each of them repeats with the training sets' common settings.
 
 set_of() {  # NAME ARGS...: make (or finish) the set OUT/dataset_GARMENT_NAME
     local name=$1
