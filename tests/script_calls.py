@@ -48,3 +48,24 @@ def script_calls(
     command = ["bash", f"examples/train/{script}", *args]
     subprocess.run(command, env=env, check=True, cwd=work)
     return [json.loads(line) for line in log.read_text().splitlines()]
+
+
+def calls_on_base(
+    script: str, out: str, tmp_path: Path, names: tuple[str, ...] = ("v4c", "v4cs")
+) -> list[list[str]]:
+    """:func:`script_calls` of ``SCRIPT tshirt OUT BASE``, BASE a folder of ``tmp_path`` holding
+    the T-shirt's canonical sets ``names`` (``canonical_tshirt_NAME.npz``, each file's text its
+    name: see :func:`copied_from_base`)."""
+    base = tmp_path / "base"
+    base.mkdir()
+    for name in names:
+        (base / f"canonical_tshirt_{name}.npz").write_text(name)
+    return script_calls(script, "tshirt", out, str(base), tmp_path=tmp_path)
+
+
+def copied_from_base(tmp_path: Path, out: str, names: tuple[str, ...] = ("v4c", "v4cs")) -> bool:
+    """Whether the files ``OUT/canonical_tshirt_NAME.npz`` that a script of
+    :func:`calls_on_base` left are BASE's, copied before the projections (the stand-in leaves a
+    projected file as it is)."""
+    folder = tmp_path / "work" / out
+    return all((folder / f"canonical_tshirt_{n}.npz").read_text() == n for n in names)

@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from tests.script_calls import script_calls
+from tests.script_calls import calls_on_base, copied_from_base, script_calls
 from usd_garment.body.model import BodyModel
 from usd_garment.cli.main import main
 from usd_garment.methods.simulation import SimulationError
@@ -477,11 +477,7 @@ def test_the_cap35_data_script_makes_stop_81s_set(tmp_path: Path) -> None:
     copies of BASE's two canonical sets."""
     from usd_garment.cli.dataset import make
 
-    base = tmp_path / "base"
-    base.mkdir()
-    for name in ("v4c", "v4cs"):
-        (base / f"canonical_tshirt_{name}.npz").write_text(name)
-    calls = script_calls("data_cap35.sh", "tshirt", "scratch/c35", str(base), tmp_path=tmp_path)
+    calls = calls_on_base("data_cap35.sh", "scratch/c35", tmp_path)
     imports = [a for a in calls if a[0] == "import-bvh"]
     assert all(a[a.index("--collars") + 1] == "rest" and "--frames" not in a for a in imports)
     readme = (MANIFESTS.parent.parent / "examples" / "mocap" / "README.md").read_text()
@@ -513,9 +509,7 @@ def test_the_cap35_data_script_makes_stop_81s_set(tmp_path: Path) -> None:
         ("scratch/c35/dataset_tshirt_cap35", f"scratch/c35/canonical_tshirt_{n}.npz")
         for n in ("v4c", "v4cs")
     ]
-    for name in ("v4c", "v4cs"):
-        copy = tmp_path / "work" / "scratch" / "c35" / f"canonical_tshirt_{name}.npz"
-        assert copy.read_text() == name  # BASE's file, copied before the projection
+    assert copied_from_base(tmp_path, "scratch/c35")
 
 
 def test_the_arms_data_script_makes_the_committed_sets(tmp_path: Path) -> None:
@@ -524,10 +518,7 @@ def test_the_arms_data_script_makes_the_committed_sets(tmp_path: Path) -> None:
     collars), makes the sets arms5 and arms4b with the settings their committed manifests
     (``docs/datasets/tshirt_NAME_stop64_manifest.json``) record, and projects arms5 onto a copy
     of BASE's v4cs, then arms4b onto a copy of that."""
-    base = tmp_path / "base"
-    base.mkdir()
-    (base / "canonical_tshirt_v4cs.npz").write_text("v4cs")
-    calls = script_calls("data_arms.sh", "tshirt", "scratch/s64", str(base), tmp_path=tmp_path)
+    calls = calls_on_base("data_arms.sh", "scratch/s64", tmp_path, ("v4cs",))
     imports = [a for a in calls if a[0] == "import-bvh"]
     assert all(a[a.index("--arm-clearance") + 1] == "0" for a in imports)
     assert all(a[a.index("--collars") + 1] == "rest" for a in imports)

@@ -36,13 +36,8 @@ for clip in 02_05:0:1854 02_06:0:1440 02_07:0:1440 02_10:0:2645; do
     fi
     captures+=(--capture "$usd:train")
 done
-source "$(dirname "$0")/sets.sh"  # set_of NAME ARGS..., project_onto FILE NAME
+source "$(dirname "$0")/sets.sh"  # set_of, project_onto, onto_base_copies
 set_of amc4 --motions 0 --shapes 1 --seed 3 "${captures[@]}"
-
-for name in v4c $LAST; do
-    file=$OUT/canonical_${GARMENT}_$name.npz
-    [ -f "$file" ] || cp "$BASE/canonical_${GARMENT}_$name.npz" "$file"
-    project_onto "$file" amc4
-done
+onto_base_copies amc4
 exit
 }

@@ -28,18 +28,11 @@ mkdir -p "$CAPTURES"
 captures=()
 for bvh in "$MOCAP"/cmu_*.bvh.xz; do
     usd=$CAPTURES/$(basename "$bvh" .bvh.xz).usdc
-    if [ ! -f "$usd" ]; then
-        usd-garment import-bvh "$bvh" -o "$usd" --collars "$COLLARS"
-    fi
+    [ -f "$usd" ] || usd-garment import-bvh "$bvh" -o "$usd" --collars "$COLLARS"
     captures+=(--capture "$usd:train")
 done
-source "$(dirname "$0")/sets.sh"  # set_of NAME ARGS..., project_onto FILE NAME
+source "$(dirname "$0")/sets.sh"  # set_of, project_onto, onto_base_copies
 set_of cap35 --motions 0 --shapes 1 --seed 3 "${captures[@]}"
-
-for name in v4c $LAST; do
-    file=$OUT/canonical_${GARMENT}_$name.npz
-    [ -f "$file" ] || cp "$BASE/canonical_${GARMENT}_$name.npz" "$file"
-    project_onto "$file" cap35
-done
+onto_base_copies cap35
 exit
 }
