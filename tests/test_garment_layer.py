@@ -63,7 +63,7 @@ def test_round_trip_composes_validates_and_reads_back(
     template = torso_template(body_model)
     before = _digest(amass_layer)
     out, root = tmp_path / "tshirt.usdc", tmp_path / "shot.usda"
-    result = dress(amass_layer, out, template=template, root_layer=root)
+    result = dress(amass_layer, out, method="lbs", template=template, root_layer=root)
     assert result.outputs == [out, root]
     assert _digest(amass_layer) == before
     assert validate_layer(out) == []
@@ -123,10 +123,11 @@ def test_value_clips_read_back_as_the_plain_layer(
 ) -> None:
     template = torso_template(body_model)
     plain, clipped = tmp_path / "plain.usda", tmp_path / "clipped.usd"
-    dress(amass_layer, plain, template=template)
+    dress(amass_layer, plain, method="lbs", template=template)
     result = dress(
-        amass_layer, clipped, template=template, clip_threshold=10, root_layer=tmp_path / "r.usda"
-    )
+        amass_layer, clipped, method="lbs", template=template, clip_threshold=10,
+        root_layer=tmp_path / "r.usda",
+    )  # fmt: skip
     clip_dir = tmp_path / "clipped.clips"
     assert result.outputs == [clipped, clip_dir, tmp_path / "r.usda"]
     assert sorted(p.name for p in clip_dir.iterdir()) == [
@@ -236,8 +237,8 @@ def test_failed_write_leaves_no_files(
 
     monkeypatch.setattr(garment_layer, "_export", failing_export)
     with pytest.raises(OSError, match="disk full"):
-        dress(amass_layer, tmp_path / "g.usdc", template=template, clip_threshold=10,
-              root_layer=tmp_path / "root.usda")  # fmt: skip
+        dress(amass_layer, tmp_path / "g.usdc", method="lbs", template=template,
+              clip_threshold=10, root_layer=tmp_path / "root.usda")  # fmt: skip
     assert set(tmp_path.iterdir()) == before
 
 
@@ -259,7 +260,7 @@ def _rig_garment(
     else:
         xform.AddRotateZOp().Set(30.0)
     stage.Save()
-    dress(rig, out, template=template, root_layer=root)
+    dress(rig, out, method="lbs", template=template, root_layer=root)
     canonical, _, info = read_garment_layer(out)
     composed = Usd.Stage.Open(str(root))
     mesh = composed.GetPrimAtPath(info.mesh)

@@ -343,6 +343,7 @@ def test_the_fields_tangent_matches_central_differences() -> None:
 def test_shipped_model_is_the_default(
     garment: str, vertices: int, body_model: BodyModel, synthetic_body: BodyModel, tmp_path: Path
 ) -> None:
+    from usd_garment.dress import dress
     from usd_garment.methods.learned import SHIPPED_MODELS, default_method, shipped_model
 
     if body_model is synthetic_body:
@@ -371,6 +372,9 @@ def test_shipped_model_is_the_default(
     points, _, layer = read_garment_layer(out)
     assert layer.method == "learned+preimage" and points.shape == (12, vertices, 3)
     assert np.isfinite(points).all()
+    result = dress(body, tmp_path / "library.usdc", garment=garment)  # no method: the same
+    assert result.method == "learned+preimage"
+    np.testing.assert_array_equal(read_garment_layer(tmp_path / "library.usdc")[0], points)
 
 
 def _run_folder_named(settings: dict[str, Any]) -> dict[str, Any]:

@@ -20,6 +20,7 @@ from usd_garment.garment.lod import carry, transfer_weights
 from usd_garment.garment.template import GARMENT_NAMES, LODS, GarmentTemplate
 from usd_garment.methods import GarmentMethod, get_method
 from usd_garment.methods.base import predict_chunks, pushes_vertices
+from usd_garment.methods.learned import default_method
 from usd_garment.motion.cuts import motion_cuts
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.usd.garment_layer import (
@@ -76,7 +77,7 @@ def dress(
     output: str | Path,
     *,
     garment: str = "tshirt",
-    method: str | GarmentMethod = "lbs",
+    method: str | GarmentMethod | None = None,
     frames: tuple[int, int] | None = None,
     lod: str = "high",
     body_model: str | Path | None = None,
@@ -99,7 +100,9 @@ def dress(
         output: the garment layer (``.usdc``/``.usd``/``.usda``).
         garment, lod: the template to load (ignored when ``template`` is given).
         method: a registered garment method name, or a method instance (e.g. a configured
-            ``SimulationMethod``).
+            ``SimulationMethod``); None: the method ``usd-garment dress`` takes when none is
+            asked for (``default_method``: the learned method with the garment's shipped model
+            at its level of detail where one ships, else "lbs+postprocess").
         frames: ``(a, b)`` dresses frames ``a .. b-1`` only.
         body_model: SMPL-layout body file; None for the embedded default.
         skeleton: Skeleton prim path when the stage has several.
@@ -129,6 +132,8 @@ def dress(
         raise ValueError(f"unknown garment '{garment}' (available: {', '.join(GARMENT_NAMES)})")
     if lod not in LODS:
         raise ValueError(f"unknown level of detail '{lod}' (available: {', '.join(LODS)})")
+    if method is None:
+        method = default_method(*((template.name, template.lod) if template else (garment, lod)))
     garment_method = get_method(method) if isinstance(method, str) else method
     seconds: dict[str, float] = {}
 
