@@ -155,6 +155,15 @@ def _smoothed(
     return members, out, info
 
 
+def _both_smoothings(tmp_path: Path, body: BodyModel, template: GarmentTemplate) -> Path:
+    """A model directory with both smoothings: :func:`_smoothed`'s latent one of 0.1 s and a
+    posed one of 0.05 s."""
+    _, out, _ = _smoothed(tmp_path, body, template, "latent", "0.1")
+    both = tmp_path / "both"
+    save_learned_model(both, replace(load_learned_model(out), posed_smoothing=0.05))
+    return both
+
+
 def _kept_and_checked(
     tmp_path: Path, out: Path, info: dict[str, object], kind: str, bad: float
 ) -> None:
@@ -218,15 +227,14 @@ def test_the_frames_before_a_cut_are_the_garment_of_the_clip_before_it(tmp_path,
     the model's frames), dressed by a model with both smoothings: the frames before the cut are
     the walk's dressed alone (its motion described, its codes smoothed and brought back to the
     input's frames, its posed garment smoothed, each on its own)."""
-    _, out, _ = _smoothed(tmp_path, body, template, "latent", "0.1")
-    save_learned_model(tmp_path / "both", replace(load_learned_model(out), posed_smoothing=0.05))
+    both = _both_smoothings(tmp_path, body, template)
     walk = make_motion("walk", 22, 120.0, seed=2, body=body)
     swing = make_motion("arm_swing", 20, 120.0, seed=3, body=body)
     pose = np.concatenate([walk.pose, swing.pose])
     trans = np.concatenate([walk.trans, swing.trans + np.array([1.0, 0.0, 0.0])])
     joined = SmplMotion(walk.betas, pose, trans, 120.0, model=walk.model)
     assert root_cuts(joined) == (22,) and motion_restarts(joined) == (22,)
-    method = SmoothedAlone(tmp_path / "both", exact_fields=True)
+    method = SmoothedAlone(both, exact_fields=True)
     before = method.predict(joined, body, template)[:22]
     np.testing.assert_allclose(before, method.predict(walk, body, template), atol=1e-5)
 
@@ -237,17 +245,16 @@ def test_the_frames_from_a_cut_on_are_the_garment_of_the_clip_after_it(tmp_path,
     from rest there as at a clip's first frame; the state the walk left is not carried over. A
     jump of the root alone (the walk moved 1 m from frame 10) is a cut but not a restart: the
     state carries across it."""
-    _, out, _ = _smoothed(tmp_path, body, template, "latent", "0.1")
-    save_learned_model(tmp_path / "both", replace(load_learned_model(out), posed_smoothing=0.05))
+    both = _both_smoothings(tmp_path, body, template)
     walk = make_motion("walk", 20, 30.0, seed=2, body=body)
     swing = make_motion("arm_swing", 20, 30.0, seed=3, body=body)
     moved = replace(swing, betas=walk.betas, trans=swing.trans + np.array([1.0, 0.0, 0.0]))
     pose = np.concatenate([walk.pose, moved.pose])
     joined = replace(walk, pose=pose, trans=np.concatenate([walk.trans, moved.trans]))
     assert root_cuts(joined) == (20,) and motion_restarts(joined) == (20,)
-    model = load_learned_model(tmp_path / "both", body)
+    model = load_learned_model(both, body)
     torch.testing.assert_close(predict_latents(model, joined)[20:], predict_latents(model, moved))
-    method = SmoothedAlone(tmp_path / "both", exact_fields=True)
+    method = SmoothedAlone(both, exact_fields=True)
     after = method.predict(joined, body, template)[20:]
     np.testing.assert_allclose(after, method.predict(moved, body, template), atol=1e-5)
     trans = walk.trans.copy()
@@ -270,15 +277,14 @@ def test_a_splice_of_the_joints_alone_is_found_or_declared(tmp_path, body, templ
     where it is declared in ``smpl:cuts`` (or ``dress --cut``); undeclared, both smoothings
     reach across it. ``dress`` reports the cuts and honours the layer's declaration and
     ``--cut`` alike."""
-    _, out, _ = _smoothed(tmp_path, body, template, "latent", "0.1")
-    save_learned_model(tmp_path / "both", replace(load_learned_model(out), posed_smoothing=0.05))
+    both = _both_smoothings(tmp_path, body, template)
     walk = make_motion("walk", 42, 120.0, seed=2, body=body)
     swing = make_motion("arm_swing", 20, 120.0, seed=3, body=body)
     pose = walk.pose.copy()
     pose[22:, 1:] = swing.pose[:, 1:]
     spliced = replace(walk, pose=pose)
     assert root_cuts(spliced) == () and motion_cuts(spliced) == (22,)
-    method = SmoothedAlone(tmp_path / "both", exact_fields=True)
+    method = SmoothedAlone(both, exact_fields=True)
     alone = method.predict(replace(walk, pose=pose[:22], trans=walk.trans[:22]), body, template)
     np.testing.assert_allclose(method.predict(spliced, body, template)[:22], alone, atol=1e-5)
     small = walk.pose.copy()
@@ -296,7 +302,7 @@ def test_a_splice_of_the_joints_alone_is_found_or_declared(tmp_path, body, templ
     write_body_layer(plain, nudged, body)
     write_body_layer(found, spliced, body)
     layers = []
-    dress = ["--method", "learned", "--model", tmp_path / "both", "--lod", "low", "--json"]
+    dress = ["--method", "learned", "--model", both, "--lod", "low", "--json"]
     runs = ((marked, [], [22.0]), (plain, ["--cut", "22"], [22.0]), (plain, [], []),
             (found, [], [22.0]))  # fmt: skip
     for source, extra, cuts in runs:
