@@ -4,6 +4,7 @@ writes the input's time codes, and a model is refused on another body or another
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import re
@@ -849,11 +850,11 @@ def test_posed_smoothing_keeps_a_vertex_out_of_its_own_part() -> None:
 
 
 def test_posed_smoothing_stops_at_the_cuts() -> None:
-    """A garment teleported 0.5 m at a cut (``root_cuts``) is smoothed on each side of it on
-    its own, the nearest frame repeated there as at the motion's ends: no frame is carried
-    towards the other side (across the jump, a Gaussian of one frame would move the frames
-    beside it 0.12 m); a chunk is smoothed as the whole motion with the cuts
-    ``Smoothing.within`` it."""
+    """A garment that jumps 0.5 m at a cut (a restart, where another motion starts:
+    ``motion_restarts``) is smoothed on each side of it on its own, the nearest frame repeated
+    there as at the motion's ends: no frame is carried towards the other side (across the jump,
+    a Gaussian of one frame would move the frames beside it 0.12 m); a chunk is smoothed as the
+    whole motion with the cuts ``Smoothing.within`` it."""
     from usd_garment.methods.learned_posing import Smoothing
 
     frames = torch.arange(20, dtype=torch.float32)
@@ -877,3 +878,92 @@ def test_posed_smoothing_stops_at_the_cuts() -> None:
     piece = (x[3:17], x[3:17], [posed[2][0][3:17]])
     chunk, _ = whole.within(3, 17).apply(x[3:17], piece, slice(4, 10), None)
     torch.testing.assert_close(chunk, smoothed[7:13])
+
+
+def _screw(count: int, jump: torch.Tensor, at: int) -> torch.Tensor:
+    """``(count, 4, 4)`` float64: a root that turns 3° about +Y and moves 2 cm along its own x
+    and 1 cm along its own z a frame (the same step in its own frame each time), moved by
+    ``jump`` ``(4, 4)`` from frame ``at`` on."""
+    angle = 3 * np.pi / 180
+    step = torch.eye(4, dtype=torch.float64)
+    step[0, 0], step[0, 2], step[2, 0], step[2, 2] = (
+        np.cos(angle), np.sin(angle), -np.sin(angle), np.cos(angle),
+    )  # fmt: skip
+    step[0, 3], step[2, 3] = 0.02, 0.01
+    root = [torch.eye(4, dtype=torch.float64)]
+    for _ in range(count - 1):
+        root.append(root[-1] @ step)
+    moved = torch.stack(root)
+    moved[at:] = jump @ moved[at:]
+    return moved
+
+
+def test_posed_smoothing_takes_a_root_jump_out() -> None:
+    """Points carried by a root that teleports 0.5 m and turns 90° at frame 10 (a jump of the
+    root alone: ``root_cuts``, no restart) are smoothed across it as the jump-free motion would
+    be, the jump put back after: the frames before it as the jump-free ones, those after as the
+    jump-free ones moved; ``RootJump.at`` finds the jump where the root's step before it (or
+    after it, where a cut or the start leaves none before) is the same as the steps around it;
+    a chunk is smoothed as the whole motion with the jumps ``Smoothing.within`` it."""
+    from usd_garment.methods.learned_posing import RootJump, Smoothing
+
+    turn = torch.tensor(
+        [[0.0, 0.0, 1.0, 0.5], [0.0, 1.0, 0.0, 0.0], [-1.0, 0.0, 0.0, 0.1], [0.0, 0.0, 0.0, 1.0]],
+        dtype=torch.float64,
+    )
+    still, root = _screw(20, torch.eye(4, dtype=torch.float64), 0), _screw(20, turn, 10)
+    local = torch.tensor([[0.1, 0.3, 0.0, 1.0], [-0.2, 0.1, 0.15, 1.0]], dtype=torch.float64)
+    x = torch.einsum("tab,nb->tna", root, local)[..., :3].float()  # (20, 2, 3) the points carried
+    plain = torch.einsum("tab,nb->tna", still, local)[..., :3].float()
+    jump = RootJump.at(10, root.float())
+    undo = torch.tensor(jump.undo, dtype=torch.float64).reshape(3, 4)
+    torch.testing.assert_close(undo, torch.linalg.inv(turn)[:3], atol=1e-6, rtol=0)
+    # The step after the jump where the one before it crosses another cut: the same here.
+    after = torch.tensor(RootJump.at(10, root.float(), cuts=(9,)).undo)
+    torch.testing.assert_close(after, torch.tensor(jump.undo), atol=1e-6, rtol=0)
+    eye = torch.eye(4)[:3].expand(20, 2, 3, 4)
+    whole = Smoothing.of(1 / 30, 30.0, (), (jump,))
+    smoothed, _ = whole.apply(x, (x, x, [eye]), slice(0, 20), None)
+    free = torch.from_numpy(gaussian_filter1d(plain.numpy(), 1.0, axis=0, mode="nearest"))
+    torch.testing.assert_close(smoothed[:10], free[:10], atol=1e-6, rtol=0)
+    moved = free[10:] @ turn[:3, :3].float().T + turn[:3, 3].float()
+    torch.testing.assert_close(smoothed[10:], moved, atol=1e-6, rtol=0)
+    # Stopped at the jump as at a restart, the frames beside it are held back (7-13 mm).
+    held, _ = Smoothing.of(1 / 30, 30.0, (10,)).apply(x, (x, x, [eye]), slice(0, 20), None)
+    assert float((held[9] - smoothed[9]).norm(dim=-1).min()) > 0.005
+    # The frames 7..13 as a chunk with the radius (4) around them, 3..17: the jump at its frame 7.
+    assert whole.within(3, 17) == Smoothing(1.0, (), (RootJump(7, jump.undo),))
+    assert whole.within(10, 20).jumps == ()
+    chunk, _ = whole.within(3, 17).apply(
+        x[3:17], (x[3:17], x[3:17], [eye[3:17]]), slice(4, 10), None
+    )
+    torch.testing.assert_close(chunk, smoothed[7:13], atol=1e-6, rtol=0)
+
+
+def test_root_jumps_are_the_cuts_that_are_no_restart(body_model: BodyModel) -> None:
+    """``root_jumps`` of a walk moved 0.5 m from frame 20: one jump, whose map takes the root
+    from frame 20 on back to within 5 mm of the walk's unmoved (2.0 mm: the walk's root does not
+    take the same step twice, which the map assumes); a restart at that frame, or no cut,
+    leaves none."""
+    from usd_garment.garment.model import GarmentModel
+    from usd_garment.methods.learned_posing import root_jumps
+    from usd_garment.motion.cuts import root_cuts
+
+    walk = make_motion("walk", 40, seed=2, body=body_model)
+    trans = walk.trans.copy()
+    trans[20:, 0] += 0.5
+    assert root_cuts(dataclasses.replace(walk, trans=trans)) == (20,)
+    articulation = GarmentModel(body_model, load_body_fields()).articulation
+    betas, pose = torch.as_tensor(walk.betas).float(), torch.as_tensor(walk.pose).float()
+    moved = torch.as_tensor(trans).float()
+    (jump,) = root_jumps(articulation, betas, pose, moved, (20,), ())
+    assert jump.frame == 20
+    undo = torch.tensor(jump.undo).reshape(3, 4).float()
+    jumped = articulation(betas, pose, moved).transforms[20:, 0, :3]  # (20, 3, 4)
+    unmoved = articulation(betas, pose, torch.as_tensor(walk.trans).float()).transforms[20:, 0]
+    back = undo[:, :3] @ jumped
+    back[..., 3] += undo[:, 3]
+    offset = (back - unmoved[:, :3]).abs().amax()
+    assert float(offset) < 0.005, float(offset)
+    assert root_jumps(articulation, betas, pose, moved, (20,), (20,)) == ()
+    assert root_jumps(articulation, betas, pose, moved, (), ()) == ()

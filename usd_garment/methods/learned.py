@@ -52,6 +52,7 @@ from usd_garment.methods.learned_posing import (
     available_cores,
     can_fork,
     pose_chunk,
+    root_jumps,
 )
 from usd_garment.motion.cuts import motion_cuts, motion_restarts, smooth_runs
 from usd_garment.motion.resample import cut_at, resampled_cuts
@@ -377,9 +378,12 @@ class LearnedMethod:
         tangents: list[Tangent] = []  # the last one is kept across chunks (_tangents)
         lap("load")
         restarts = motion_restarts(motion)  # the regressor's
-        cuts = motion_cuts(motion, restarts)  # the regressor's and the smoothing's
+        cuts = motion_cuts(motion, restarts)  # the descriptor's; the smoothing takes the jumps out
         z = predict_latents(model, motion, cuts, restarts)
-        smoothing = Smoothing.of(self.posed_smoothing(model), motion.fps, cuts)
+        smoothing = Smoothing.of(
+            self.posed_smoothing(model), motion.fps, restarts,
+            root_jumps(garment_model.articulation, betas, pose, trans, cuts, restarts),
+        )  # fmt: skip
         lap("regressor")
         posing = self._posing_pool(garment_model, betas, boxes, -(-t_frames // chunk))
         pending: deque[Future[np.ndarray]] = deque()  # the chunks the workers have, in order

@@ -79,22 +79,78 @@ TRUNCATE = 4.0
 
 
 @dataclass(frozen=True)
+class RootJump:
+    """A jump of the root alone into frame ``frame`` of a motion (a cut of
+    :func:`~usd_garment.motion.cuts.root_cuts` that is no restart: the motion goes on, moved),
+    with ``undo``, the rigid map ``(3, 4)`` row by row (m) that takes the posed frames from
+    ``frame`` on to where the root's step before the jump, taken again, would have carried
+    them: the frames on both sides then form one motion, which a Gaussian may smooth."""
+
+    frame: int
+    undo: tuple[float, ...]
+
+    @classmethod
+    def at(cls, frame: int, root: torch.Tensor, cuts: Sequence[int] = ()) -> RootJump:
+        """The jump into ``frame`` (0 < frame < T) of a motion whose root (pelvis) skinning
+        transforms are ``root`` ``(T, 4, 4)``, its other ``cuts`` (frames) aside: the root
+        expected at ``frame`` is the one at ``frame`` − 1 stepped on by its step before
+        (``frame`` − 2 to ``frame`` − 1), or by its step after (``frame`` to ``frame`` + 1)
+        where a cut or the motion's start leaves none before, or by none."""
+        frames = root.double()
+        before, after = frame - 1, frame + 1
+        if before >= 1 and before not in cuts:
+            step = torch.linalg.solve(frames[before - 1], frames[before])
+        elif after < len(frames) and after not in cuts:
+            step = torch.linalg.solve(frames[frame], frames[after])
+        else:
+            step = torch.eye(4, dtype=torch.float64)
+        expected = frames[before] @ step
+        undo = expected @ torch.linalg.inv(frames[frame])
+        return cls(frame, tuple(undo[:3].reshape(-1).tolist()))
+
+
+def root_jumps(
+    articulation: Callable[[torch.Tensor, torch.Tensor, torch.Tensor], Articulation],
+    betas: torch.Tensor,
+    pose: torch.Tensor,
+    trans: torch.Tensor,
+    cuts: Sequence[int],
+    restarts: Sequence[int],
+) -> tuple[RootJump, ...]:
+    """The jumps of the root alone of a motion posed by ``pose`` ``(T, J, 3)`` (rad) and
+    ``trans`` ``(T, 3)`` (m) on the body shape ``betas`` ``(K,)``: its ``cuts`` that are not
+    ``restarts`` (frames), each with the map that takes it out (:meth:`RootJump.at`; the root's
+    transforms from ``articulation``, ``GarmentModel.articulation``)."""
+    frames = [k for k in cuts if k not in set(restarts)]
+    if not frames:
+        return ()
+    root = articulation(betas, pose, trans).transforms[:, 0]
+    return tuple(RootJump.at(k, root, cuts) for k in frames)
+
+
+@dataclass(frozen=True)
 class Smoothing:
     """A Gaussian of ``sigma`` frames over the frames of a posed garment (``LearnedModel``'s
     ``posed_smoothing`` at the input's frame rate; 0: none), the nearest frame repeated beyond
-    the motion's ends and on each side of its ``cuts`` (the frames where it starts anew,
-    :func:`~usd_garment.motion.cuts.motion_cuts`: across a teleport of the root the Gaussian
-    would carry the garment a frame off the body). A chunk of frames is smoothed as the whole
-    motion would be where it is posed with :attr:`radius` frames of the motion on each side
-    (fewer at its ends), with the cuts :meth:`within` it."""
+    the motion's ends and on each side of its ``cuts`` (the frames where another motion starts,
+    :func:`~usd_garment.motion.cuts.motion_restarts`). Across each of its ``jumps`` (a jump of
+    the root alone, a teleport or a heading snapped) the Gaussian goes on, the jump taken out
+    of the frames after it while they are smoothed and put back after: the frames straight
+    across a teleport would carry the garment a frame off the body, and repeating the nearest
+    frame there would hold it back a step. A chunk of frames is smoothed as the whole motion
+    would be where it is posed with :attr:`radius` frames of the motion on each side (fewer at
+    its ends), with the cuts and jumps :meth:`within` it."""
 
     sigma: float = 0.0
     cuts: tuple[int, ...] = ()
+    jumps: tuple[RootJump, ...] = ()
 
     @classmethod
-    def of(cls, seconds: float, fps: float, cuts: tuple[int, ...] = ()) -> Smoothing:
+    def of(
+        cls, seconds: float, fps: float, cuts: Sequence[int] = (), jumps: Sequence[RootJump] = ()
+    ) -> Smoothing:
         """The smoothing of ``seconds`` (standard deviation) at ``fps`` frames a second."""
-        return cls(seconds * fps, cuts)
+        return cls(seconds * fps, tuple(cuts), tuple(jumps))
 
     @property
     def radius(self) -> int:
@@ -102,9 +158,13 @@ class Smoothing:
         return int(TRUNCATE * self.sigma + 0.5) if self.sigma > 0 else 0
 
     def within(self, start: int, stop: int) -> Smoothing:
-        """This smoothing of the frames ``start`` to ``stop`` of the motion: the cuts among
-        them, counted from ``start``."""
-        return Smoothing(self.sigma, tuple(k - start for k in self.cuts if start < k < stop))
+        """This smoothing of the frames ``start`` to ``stop`` of the motion: the cuts and jumps
+        among them, counted from ``start``."""
+        return Smoothing(
+            self.sigma,
+            tuple(k - start for k in self.cuts if start < k < stop),
+            tuple(RootJump(j.frame - start, j.undo) for j in self.jumps if start < j.frame < stop),
+        )
 
     def apply(
         self,
@@ -133,8 +193,7 @@ class Smoothing:
         if self.sigma <= 0:
             return points[core], before[core]
         assert pieces is not None, "pose_chunk(..., blended=True) for a smoothing"
-        smoothed = smooth_runs(points.numpy(), self.sigma, self.cuts, truncate=TRUNCATE)
-        smoothed = torch.from_numpy(smoothed)
+        smoothed = torch.from_numpy(self._smoothed(points.numpy()))
         out: list[tuple[torch.Tensor, torch.Tensor]] = []
         start = 0
         for blended in pieces:  # the core's frames piece by piece
@@ -148,6 +207,29 @@ class Smoothing:
                 ))  # fmt: skip
             start = stop
         return torch.cat([v for v, _ in out]), torch.cat([u for _, u in out])
+
+    def _smoothed(self, points: np.ndarray) -> np.ndarray:
+        """The posed garment ``(t, N, 3)`` float32 (m) smoothed: each run between the cuts on
+        its own, with the jumps taken out while it is (their maps composed in order: the
+        frames after the second jump are taken to the first's run, then before it)."""
+        if not self.jumps:
+            return smooth_runs(points, self.sigma, self.cuts, truncate=TRUNCATE)
+        maps = np.broadcast_to(np.eye(4), (len(points), 4, 4)).copy()  # (t, 4, 4) float64
+        for jump in self.jumps:
+            undo = np.eye(4)
+            undo[:3] = np.reshape(jump.undo, (3, 4))
+            maps[jump.frame :] = maps[jump.frame - 1] @ undo
+        moved = _mapped(maps, points)
+        smoothed = smooth_runs(moved, self.sigma, self.cuts, truncate=TRUNCATE)
+        start = self.jumps[0].frame  # the frames before the first jump were not moved
+        smoothed[start:] = _mapped(np.linalg.inv(maps[start:]), smoothed[start:])
+        return smoothed.astype(np.float32)
+
+
+def _mapped(maps: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """The points ``(t, N, 3)`` (m) of each frame moved by its rigid map ``(t, 4, 4)``, in
+    float64."""
+    return np.einsum("tab,tnb->tna", maps[:, :3, :3], points) + maps[:, None, :3, 3]
 
 
 def _own_preimages(

@@ -1,10 +1,11 @@
 """Cuts in a motion: frames where the root jumps (a teleport, a heading snapped, two clips joined
 end to end), where the joints jump in one step that stands out from the steps beside it (a
 splice that changes only the joints), and those the animation declares
-(``SmplMotion.cut_times``: a splice too small to be found), so that what is smoothed over frames
-is not smoothed across them. The splices and the declared cuts are also restarts, where another
-motion starts: a regressor's state starts from rest there, while across a jump of the root alone
-the motion goes on, moved.
+(``SmplMotion.cut_times``: a splice too small to be found), so that no differences over frames
+are taken across them. The splices and the declared cuts are also restarts, where another motion
+starts: a regressor's state starts from rest there and what is smoothed over frames stops, while
+across a jump of the root alone the motion goes on, moved: the state carries across it, and a
+smoothing goes on with the jump taken out (the posed garment's) or unseen (the latent codes').
 
 Units: metres, radians, frames per second.
 """
