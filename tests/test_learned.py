@@ -941,29 +941,42 @@ def test_posed_smoothing_takes_a_root_jump_out() -> None:
 
 
 def test_root_jumps_are_the_cuts_that_are_no_restart(body_model: BodyModel) -> None:
-    """``root_jumps`` of a walk moved 0.5 m from frame 20: one jump, whose map takes the root
-    from frame 20 on back to within 5 mm of the walk's unmoved (2.0 mm: the walk's root does not
-    take the same step twice, which the map assumes); a restart at that frame, or no cut,
-    leaves none."""
+    """``root_jumps`` of a walk moved 0.5 m and turned 90° about the up axis from frame 20:
+    one jump, whose map takes the root from frame 20 on back to within 1 mm of the walk's
+    unmoved (0.18 mm: the walk's root does not take the same step twice, and the map takes the
+    step midway between the steps beside the jump); ``without_jumps`` gives the walk back as
+    closely; a restart at that frame, or no cut, leaves no jump."""
+    from scipy.spatial.transform import Rotation
+
     from usd_garment.garment.model import GarmentModel
-    from usd_garment.methods.learned_posing import root_jumps
+    from usd_garment.methods.learned_posing import root_jumps, without_jumps
     from usd_garment.motion.cuts import root_cuts
 
     walk = make_motion("walk", 40, seed=2, body=body_model)
-    trans = walk.trans.copy()
-    trans[20:, 0] += 0.5
-    assert root_cuts(dataclasses.replace(walk, trans=trans)) == (20,)
+    turn = Rotation.from_rotvec([0.0, np.pi / 2, 0.0])
+    pose, trans = walk.pose.copy(), walk.trans.copy()
+    pose[20:, 0] = (turn * Rotation.from_rotvec(pose[20:, 0])).as_rotvec()
+    trans[20:] = turn.apply(trans[20:]) + np.array([0.5, 0.0, 0.0])
+    jumped = dataclasses.replace(walk, pose=pose, trans=trans)
+    assert root_cuts(jumped) == (20,)
     articulation = GarmentModel(body_model, load_body_fields()).articulation
-    betas, pose = torch.as_tensor(walk.betas).float(), torch.as_tensor(walk.pose).float()
-    moved = torch.as_tensor(trans).float()
-    (jump,) = root_jumps(articulation, betas, pose, moved, (20,), ())
+    betas = torch.as_tensor(walk.betas).float()
+    args = (betas, torch.as_tensor(pose).float(), torch.as_tensor(trans).float())
+    (jump,) = root_jumps(articulation, *args, (20,), ())
     assert jump.frame == 20
     undo = torch.tensor(jump.undo).reshape(3, 4).float()
-    jumped = articulation(betas, pose, moved).transforms[20:, 0, :3]  # (20, 3, 4)
-    unmoved = articulation(betas, pose, torch.as_tensor(walk.trans).float()).transforms[20:, 0]
-    back = undo[:, :3] @ jumped
+    back = undo[:, :3] @ articulation(*args).transforms[20:, 0, :3]  # (20, 3, 4)
     back[..., 3] += undo[:, 3]
-    offset = (back - unmoved[:, :3]).abs().amax()
-    assert float(offset) < 0.005, float(offset)
-    assert root_jumps(articulation, betas, pose, moved, (20,), (20,)) == ()
-    assert root_jumps(articulation, betas, pose, moved, (), ()) == ()
+    unmoved = articulation(
+        betas, torch.as_tensor(walk.pose).float(), torch.as_tensor(walk.trans).float()
+    )
+    assert float((back - unmoved.transforms[20:, 0, :3]).abs().max()) < 1e-3
+    seen = without_jumps(jumped, (jump,), body_model)
+    assert np.array_equal(seen.trans[:20], walk.trans[:20])
+    np.testing.assert_allclose(seen.trans, walk.trans, atol=1e-3)
+    turned = Rotation.from_rotvec(seen.pose[:, 0]) * Rotation.from_rotvec(walk.pose[:, 0]).inv()
+    assert float(turned.magnitude().max()) < 1e-3
+    assert np.array_equal(seen.pose[:, 1:], walk.pose[:, 1:])
+    assert root_jumps(articulation, *args, (20,), (20,)) == ()
+    assert root_jumps(articulation, *args, (), ()) == ()
+    assert without_jumps(jumped, (), body_model) is jumped

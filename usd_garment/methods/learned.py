@@ -53,6 +53,7 @@ from usd_garment.methods.learned_posing import (
     can_fork,
     pose_chunk,
     root_jumps,
+    without_jumps,
 )
 from usd_garment.motion.cuts import motion_cuts, motion_restarts, smooth_runs
 from usd_garment.motion.resample import cut_at, resampled_cuts
@@ -377,13 +378,13 @@ class LearnedMethod:
         t_frames = motion.num_frames
         tangents: list[Tangent] = []  # the last one is kept across chunks (_tangents)
         lap("load")
-        restarts = motion_restarts(motion)  # the regressor's
-        cuts = motion_cuts(motion, restarts)  # the descriptor's; the smoothing takes the jumps out
-        z = predict_latents(model, motion, cuts, restarts)
-        smoothing = Smoothing.of(
-            self.posed_smoothing(model), motion.fps, restarts,
-            root_jumps(garment_model.articulation, betas, pose, trans, cuts, restarts),
-        )  # fmt: skip
+        # The cuts where another motion starts, and the jumps of the root alone, which the
+        # networks (the motion without them) and the smoothing (the posed garment) take out.
+        restarts = motion_restarts(motion)
+        cuts = motion_cuts(motion, restarts)
+        jumps = root_jumps(garment_model.articulation, betas, pose, trans, cuts, restarts)
+        z = predict_latents(model, without_jumps(motion, jumps, body), restarts, restarts)
+        smoothing = Smoothing.of(self.posed_smoothing(model), motion.fps, restarts, jumps)
         lap("regressor")
         posing = self._posing_pool(garment_model, betas, boxes, -(-t_frames // chunk))
         pending: deque[Future[np.ndarray]] = deque()  # the chunks the workers have, in order
