@@ -4,7 +4,6 @@ writes the input's time codes, and a model is refused on another body or another
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import os
 import re
@@ -905,7 +904,8 @@ def test_posed_smoothing_takes_a_root_jump_out() -> None:
     jump-free ones moved; ``RootJump.at`` finds the jump where the root's step before it (or
     after it, where a cut or the start leaves none before) is the same as the steps around it;
     a chunk is smoothed as the whole motion with the jumps ``Smoothing.within`` it."""
-    from usd_garment.methods.learned_posing import RootJump, Smoothing
+    from usd_garment.methods.learned_posing import Smoothing
+    from usd_garment.motion.jumps import RootJump
 
     turn = torch.tensor(
         [[0.0, 0.0, 1.0, 0.5], [0.0, 1.0, 0.0, 0.0], [-1.0, 0.0, 0.0, 0.1], [0.0, 0.0, 0.0, 1.0]],
@@ -915,11 +915,11 @@ def test_posed_smoothing_takes_a_root_jump_out() -> None:
     local = torch.tensor([[0.1, 0.3, 0.0, 1.0], [-0.2, 0.1, 0.15, 1.0]], dtype=torch.float64)
     x = torch.einsum("tab,nb->tna", root, local)[..., :3].float()  # (20, 2, 3) the points carried
     plain = torch.einsum("tab,nb->tna", still, local)[..., :3].float()
-    jump = RootJump.at(10, root.float())
+    jump = RootJump.at(10, root.numpy())
     undo = torch.tensor(jump.undo, dtype=torch.float64).reshape(3, 4)
     torch.testing.assert_close(undo, torch.linalg.inv(turn)[:3], atol=1e-6, rtol=0)
     # The step after the jump where the one before it crosses another cut: the same here.
-    after = torch.tensor(RootJump.at(10, root.float(), cuts=(9,)).undo)
+    after = torch.tensor(RootJump.at(10, root.numpy(), cuts=(9,)).undo)
     torch.testing.assert_close(after, torch.tensor(jump.undo), atol=1e-6, rtol=0)
     eye = torch.eye(4)[:3].expand(20, 2, 3, 4)
     whole = Smoothing.of(1 / 30, 30.0, (), (jump,))
@@ -938,45 +938,3 @@ def test_posed_smoothing_takes_a_root_jump_out() -> None:
         x[3:17], (x[3:17], x[3:17], [eye[3:17]]), slice(4, 10), None
     )
     torch.testing.assert_close(chunk, smoothed[7:13], atol=1e-6, rtol=0)
-
-
-def test_root_jumps_are_the_cuts_that_are_no_restart(body_model: BodyModel) -> None:
-    """``root_jumps`` of a walk moved 0.5 m and turned 90° about the up axis from frame 20:
-    one jump, whose map takes the root from frame 20 on back to within 1 mm of the walk's
-    unmoved (0.18 mm: the walk's root does not take the same step twice, and the map takes the
-    step midway between the steps beside the jump); ``without_jumps`` gives the walk back as
-    closely; a restart at that frame, or no cut, leaves no jump."""
-    from scipy.spatial.transform import Rotation
-
-    from usd_garment.garment.model import GarmentModel
-    from usd_garment.methods.learned_posing import root_jumps, without_jumps
-    from usd_garment.motion.cuts import root_cuts
-
-    walk = make_motion("walk", 40, seed=2, body=body_model)
-    turn = Rotation.from_rotvec([0.0, np.pi / 2, 0.0])
-    pose, trans = walk.pose.copy(), walk.trans.copy()
-    pose[20:, 0] = (turn * Rotation.from_rotvec(pose[20:, 0])).as_rotvec()
-    trans[20:] = turn.apply(trans[20:]) + np.array([0.5, 0.0, 0.0])
-    jumped = dataclasses.replace(walk, pose=pose, trans=trans)
-    assert root_cuts(jumped) == (20,)
-    articulation = GarmentModel(body_model, load_body_fields()).articulation
-    betas = torch.as_tensor(walk.betas).float()
-    args = (betas, torch.as_tensor(pose).float(), torch.as_tensor(trans).float())
-    (jump,) = root_jumps(articulation, *args, (20,), ())
-    assert jump.frame == 20
-    undo = torch.tensor(jump.undo).reshape(3, 4).float()
-    back = undo[:, :3] @ articulation(*args).transforms[20:, 0, :3]  # (20, 3, 4)
-    back[..., 3] += undo[:, 3]
-    unmoved = articulation(
-        betas, torch.as_tensor(walk.pose).float(), torch.as_tensor(walk.trans).float()
-    )
-    assert float((back - unmoved.transforms[20:, 0, :3]).abs().max()) < 1e-3
-    seen = without_jumps(jumped, (jump,), body_model)
-    assert np.array_equal(seen.trans[:20], walk.trans[:20])
-    np.testing.assert_allclose(seen.trans, walk.trans, atol=1e-3)
-    turned = Rotation.from_rotvec(seen.pose[:, 0]) * Rotation.from_rotvec(walk.pose[:, 0]).inv()
-    assert float(turned.magnitude().max()) < 1e-3
-    assert np.array_equal(seen.pose[:, 1:], walk.pose[:, 1:])
-    assert root_jumps(articulation, *args, (20,), (20,)) == ()
-    assert root_jumps(articulation, *args, (), ()) == ()
-    assert without_jumps(jumped, (), body_model) is jumped

@@ -52,10 +52,9 @@ from usd_garment.methods.learned_posing import (
     available_cores,
     can_fork,
     pose_chunk,
-    root_jumps,
-    without_jumps,
 )
 from usd_garment.motion.cuts import motion_cuts, motion_restarts, smooth_runs
+from usd_garment.motion.jumps import root_jumps, without_jumps
 from usd_garment.motion.resample import cut_at, resampled_cuts
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.regressor.descriptor import MODEL_FPS, at_model_rate, motion_descriptor
@@ -382,7 +381,7 @@ class LearnedMethod:
         # networks (the motion without them) and the smoothing (the posed garment) take out.
         restarts = motion_restarts(motion)
         cuts = motion_cuts(motion, restarts)
-        jumps = root_jumps(garment_model.articulation, betas, pose, trans, cuts, restarts)
+        jumps = root_jumps(motion, body, cuts, restarts)
         z = predict_latents(model, without_jumps(motion, jumps, body), restarts, restarts)
         smoothing = Smoothing.of(self.posed_smoothing(model), motion.fps, restarts, jumps)
         lap("regressor")

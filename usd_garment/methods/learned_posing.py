@@ -19,20 +19,18 @@ import multiprocessing
 import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ProcessPoolExecutor
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 import torch
-from scipy.spatial.transform import Rotation
 
 from usd_garment.body.lbs import unskin_blended
-from usd_garment.body.model import BodyModel
 from usd_garment.canonical.preimage_push import PartBoxes, preimage_push
 from usd_garment.canonical.push_out import LIPSCHITZ, push_out_canonical
 from usd_garment.fields.body_fields import FieldTangent
 from usd_garment.garment.model import Articulation, GarmentModel
 from usd_garment.motion.cuts import smooth_runs
-from usd_garment.motion.sequence import SmplMotion
+from usd_garment.motion.jumps import RootJump, jump_maps, mapped
 
 #: Frames posed at once within a chunk (bounds memory: ~N·(3 + 24 + 30) floats per frame).
 POSE_FRAMES = 64
@@ -79,73 +77,6 @@ def pose_chunk(
 
 #: The Gaussian of :class:`Smoothing` reaches this many standard deviations (scipy's default).
 TRUNCATE = 4.0
-
-
-@dataclass(frozen=True)
-class RootJump:
-    """A jump of the root alone into frame ``frame`` of a motion (a cut of
-    :func:`~usd_garment.motion.cuts.root_cuts` that is no restart: the motion goes on, moved),
-    with ``undo``, the rigid map ``(3, 4)`` row by row (m) that takes the posed frames from
-    ``frame`` on to where the root's steps beside the jump, met midway, would have carried
-    them (:meth:`at`): the frames on both sides then form one motion, which a Gaussian may
-    smooth and the networks may see (:func:`without_jumps`)."""
-
-    frame: int
-    undo: tuple[float, ...]
-
-    @classmethod
-    def at(cls, frame: int, root: torch.Tensor, cuts: Sequence[int] = ()) -> RootJump:
-        """The jump into ``frame`` (0 < frame < T) of a motion whose root (pelvis) skinning
-        transforms are ``root`` ``(T, 4, 4)``, its other ``cuts`` (frames) aside: the root
-        expected at ``frame`` is the one at ``frame`` − 1 stepped on by the step midway between
-        the root's steps before (``frame`` − 2 to ``frame`` − 1) and after (``frame`` to
-        ``frame`` + 1) the jump, in the root's own frame; by the one of them that no cut or end
-        of the motion leaves out, or by none."""
-        frames = root.double().numpy()
-        before, after = frame - 1, frame + 1
-        steps = []
-        if before >= 1 and before not in cuts:
-            steps.append(np.linalg.solve(frames[before - 1], frames[before]))
-        if after < len(frames) and after not in cuts:
-            steps.append(np.linalg.solve(frames[frame], frames[after]))
-        step = _midway(steps)
-        undo = frames[before] @ step @ np.linalg.inv(frames[frame])
-        return cls(frame, tuple(undo[:3].reshape(-1).tolist()))
-
-
-def _midway(steps: Sequence[np.ndarray]) -> np.ndarray:
-    """``(4, 4)``: the rigid map midway between the rigid maps ``steps`` (none, one or two
-    ``(4, 4)``): their translations' mean and the rotation halfway from one to the other."""
-    if not steps:
-        return np.eye(4)
-    if len(steps) == 1:
-        return steps[0]
-    first, second = (Rotation.from_matrix(s[:3, :3]) for s in steps)
-    middle = np.eye(4)
-    middle[:3, :3] = (
-        first * Rotation.from_rotvec((first.inv() * second).as_rotvec() / 2)
-    ).as_matrix()
-    middle[:3, 3] = (steps[0][:3, 3] + steps[1][:3, 3]) / 2
-    return middle
-
-
-def root_jumps(
-    articulation: Callable[[torch.Tensor, torch.Tensor, torch.Tensor], Articulation],
-    betas: torch.Tensor,
-    pose: torch.Tensor,
-    trans: torch.Tensor,
-    cuts: Sequence[int],
-    restarts: Sequence[int],
-) -> tuple[RootJump, ...]:
-    """The jumps of the root alone of a motion posed by ``pose`` ``(T, J, 3)`` (rad) and
-    ``trans`` ``(T, 3)`` (m) on the body shape ``betas`` ``(K,)``: its ``cuts`` that are not
-    ``restarts`` (frames), each with the map that takes it out (:meth:`RootJump.at`; the root's
-    transforms from ``articulation``, ``GarmentModel.articulation``)."""
-    frames = [k for k in cuts if k not in set(restarts)]
-    if not frames:
-        return ()
-    root = articulation(betas, pose, trans).transforms[:, 0]
-    return tuple(RootJump.at(k, root, cuts) for k in frames)
 
 
 @dataclass(frozen=True)
@@ -234,53 +165,11 @@ class Smoothing:
         if not self.jumps:
             return smooth_runs(points, self.sigma, self.cuts, truncate=TRUNCATE)
         maps = jump_maps(len(points), self.jumps)
-        moved = _mapped(maps, points)
+        moved = mapped(maps, points)
         smoothed = smooth_runs(moved, self.sigma, self.cuts, truncate=TRUNCATE)
         start = self.jumps[0].frame  # the frames before the first jump were not moved
-        smoothed[start:] = _mapped(np.linalg.inv(maps[start:]), smoothed[start:])
+        smoothed[start:] = mapped(np.linalg.inv(maps[start:]), smoothed[start:])
         return smoothed.astype(np.float32)
-
-
-def jump_maps(count: int, jumps: Sequence[RootJump]) -> np.ndarray:
-    """``(count, 4, 4)`` float64: for each frame of a motion, the rigid map (m) that takes its
-    ``jumps`` (increasing frames) out: the identity before the first, and the jumps' maps
-    composed in order after it (the frames after the second jump are taken to the first's
-    run, then before it)."""
-    maps = np.broadcast_to(np.eye(4), (count, 4, 4)).copy()
-    for jump in jumps:
-        undo = np.eye(4)
-        undo[:3] = np.reshape(jump.undo, (3, 4))
-        maps[jump.frame :] = maps[jump.frame - 1] @ undo
-    return maps
-
-
-def without_jumps(motion: SmplMotion, jumps: Sequence[RootJump], body: BodyModel) -> SmplMotion:
-    """``motion`` with its ``jumps`` of the root alone taken out (:func:`jump_maps`): the root's
-    rotation and translation from the first jump on moved as its skinning transform on
-    ``body`` is, so that what the networks see goes on across each jump as the motion without
-    it would (to the root's change of step there). The frames before the first jump are
-    ``motion``'s own."""
-    if not jumps:
-        return motion
-    with torch.no_grad():
-        _, joints = body.shaped(torch.as_tensor(motion.betas, dtype=torch.float32)[None])
-    pelvis = joints[0, 0].double().numpy()  # J(β)₀ (m), which SMPL turns the root about
-    start = jumps[0].frame
-    maps = jump_maps(motion.num_frames, jumps)[start:]  # (T − start, 4, 4)
-    turn, shift = maps[:, :3, :3], maps[:, :3, 3]
-    pose, trans = motion.pose.copy(), motion.trans.copy()
-    root = Rotation.from_matrix(turn) * Rotation.from_rotvec(pose[start:, 0])
-    pose[start:, 0] = root.as_rotvec()
-    # R'(x − J₀) + J₀ + trans' = U(R(x − J₀) + J₀ + trans): trans' = U(trans + J₀) − J₀.
-    moved = np.einsum("tab,tb->ta", turn, trans[start:] + pelvis) + shift - pelvis
-    trans[start:] = moved
-    return replace(motion, pose=pose, trans=trans)
-
-
-def _mapped(maps: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """The points ``(t, N, 3)`` (m) of each frame moved by its rigid map ``(t, 4, 4)``, in
-    float64."""
-    return np.einsum("tab,tnb->tna", maps[:, :3, :3], points) + maps[:, None, :3, 3]
 
 
 def _own_preimages(
