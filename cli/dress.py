@@ -230,7 +230,11 @@ def dress(
         f"in {sum(s.values()):.2f} s (read {s['read']:.2f}, compute {s['compute']:.2f}, "
         f"write {s['write']:.2f})"
     )
-    if result.cuts:
-        click.echo(f"starts anew at time codes {', '.join(f'{t:g}' for t in result.cuts)}")
+    restarts = [t for t in result.cuts if t not in result.root_jumps]
+    if restarts:
+        click.echo(f"starts anew at time codes {', '.join(f'{t:g}' for t in restarts)}")
+    if result.root_jumps:
+        jumps = ", ".join(f"{t:g}" for t in result.root_jumps)
+        click.echo(f"the root alone jumps at time codes {jumps} (one motion going on, moved)")
     for path in result.outputs:
         click.echo(f"wrote {path}")

@@ -291,6 +291,16 @@ def test_a_jump_of_the_root_alone_is_taken_out(tmp_path, body, template):
     before = np.abs(got[:20] - method.predict(walk, body, template)[:20]).max()
     after = np.abs(got[20:] - method.predict(moved, body, template)[20:]).max()
     assert max(before, after) < 1e-3, (before, after)
+    # ``dress`` reports the jump as one, not as a place where the motion starts anew.
+    layer = tmp_path / "jumped.usda"
+    write_body_layer(layer, jumped, body)
+    args = ["dress", layer, "--method", "learned", "--model", both, "--lod", "low"]
+    code, output = _run([*args, "-o", tmp_path / "a.usdc", "--json"])
+    assert code == 0, output
+    assert json.loads(output)["cuts"] == json.loads(output)["root_jumps"] == [20.0]
+    code, output = _run([*args, "-o", tmp_path / "b.usdc"])
+    assert "the root alone jumps at time codes 20 (one motion going on, moved)" in output
+    assert "starts anew" not in output
 
 
 def test_a_splice_of_the_joints_alone_is_found_or_declared(tmp_path, body, template):
@@ -333,7 +343,9 @@ def test_a_splice_of_the_joints_alone_is_found_or_declared(tmp_path, body, templ
         layers.append(tmp_path / f"out{len(layers)}.usdc")
         code, output = _run(["dress", source, "-o", layers[-1], *dress, *extra])
         assert code == 0, output
-        assert json.loads(output)["cuts"] == cuts
+        assert json.loads(output)["cuts"] == cuts and json.loads(output)["root_jumps"] == []
+    code, output = _run(["dress", marked, "-o", tmp_path / "text.usdc", *dress[:-1]])
+    assert "starts anew at time codes 22\n" in output and "jumps" not in output
     first, second, third = (read_garment_layer(p)[0] for p in layers[:3])
     np.testing.assert_array_equal(first, second)
     assert np.abs(first - third).max() > 1e-4

@@ -21,7 +21,7 @@ from usd_garment.garment.template import GARMENT_NAMES, LODS, GarmentTemplate
 from usd_garment.methods import GarmentMethod, get_method
 from usd_garment.methods.base import predict_chunks, pushes_vertices
 from usd_garment.methods.learned import default_method
-from usd_garment.motion.cuts import motion_cuts
+from usd_garment.motion.cuts import motion_cuts, motion_restarts
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.usd.garment_layer import (
     CLIP_THRESHOLD,
@@ -47,8 +47,11 @@ class DressResult:
         outputs: the files and folders written.
         method: the method name.
         garment: the garment name.
-        cuts: time codes of the frames where the motion starts anew (``motion_cuts``: found
-            where the root jumps, or declared by ``smpl:cuts`` and ``cuts``).
+        cuts: time codes of the frames where the motion starts anew or its root jumps
+            (``motion_cuts``: found where the root or the joints jump, or declared by
+            ``smpl:cuts`` and ``cuts``).
+        root_jumps: those of ``cuts`` where the root alone jumps (a teleport, a snapped
+            heading): one motion going on, moved, across which the learned garment goes on.
     """
 
     frames: int
@@ -58,6 +61,7 @@ class DressResult:
     method: str = ""
     garment: str = ""
     cuts: list[float] = field(default_factory=list)
+    root_jumps: list[float] = field(default_factory=list)
 
     def to_json(self) -> dict[str, object]:
         return {
@@ -69,6 +73,7 @@ class DressResult:
             "frames_per_second": self.frames / max(sum(self.seconds.values()), 1e-9),
             "outputs": [str(p) for p in self.outputs],
             "cuts": self.cuts,
+            "root_jumps": self.root_jumps,
         }
 
 
@@ -206,6 +211,8 @@ def dress(
         start = time.perf_counter()
     seconds["write"] += time.perf_counter() - start  # the files renamed into place
     assert writer is not None
+    restarts = motion_restarts(motion)
+    cuts = motion_cuts(motion, restarts)
     return DressResult(
         frames=motion.num_frames,
         vertices=len(template.vertices),
@@ -213,7 +220,8 @@ def dress(
         outputs=writer.outputs,
         method=garment_method.name,
         garment=template.name,
-        cuts=motion.time_codes[list(motion_cuts(motion))].tolist(),
+        cuts=motion.time_codes[list(cuts)].tolist(),
+        root_jumps=motion.time_codes[[k for k in cuts if k not in restarts]].tolist(),
     )
 
 
