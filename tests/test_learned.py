@@ -901,9 +901,9 @@ def test_posed_smoothing_takes_a_root_jump_out() -> None:
     """Points carried by a root that teleports 0.5 m and turns 90° at frame 10 (a jump of the
     root alone: ``root_cuts``, no restart) are smoothed across it as the jump-free motion would
     be, the jump put back after: the frames before it as the jump-free ones, those after as the
-    jump-free ones moved; ``RootJump.at`` finds the jump where the root's step before it (or
-    after it, where a cut or the start leaves none before) is the same as the steps around it;
-    a chunk is smoothed as the whole motion with the jumps ``Smoothing.within`` it."""
+    jump-free ones moved; ``RootJump.at`` finds the jump exactly where the root's steps before
+    and after it (met midway, or the one after where a cut leaves none before) are the steps
+    around it; a chunk is smoothed as the whole motion with the jumps ``Smoothing.within`` it."""
     from usd_garment.methods.learned_posing import Smoothing
     from usd_garment.motion.jumps import RootJump
 
