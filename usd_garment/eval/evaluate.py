@@ -14,7 +14,8 @@ from usd_garment.eval.body_distance import BodyPool
 from usd_garment.eval.metrics import GarmentMetrics, evaluate_garment, face_joints
 from usd_garment.garment.lod import carry_to_lod, lod_with_vertices
 from usd_garment.garment.template import GARMENT_NAMES
-from usd_garment.motion.cuts import motion_cuts
+from usd_garment.motion.cuts import motion_cuts, motion_restarts
+from usd_garment.motion.jumps import jump_maps, mapped, root_jumps
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.usd.errors import UsdInputError
 from usd_garment.usd.garment_read import read_garment_layer
@@ -76,9 +77,10 @@ def evaluate_layer(
     selected one) on the body of ``body_input``; against a ``reference`` layer of another
     level of detail of the same garment, the reference is carried to the garment's level of
     detail first (:mod:`usd_garment.garment.lod`); no acceleration is measured across the body's
-    cuts (``motion_cuts``: a teleport, a snapped heading, a splice of the joints, one the body
-    layer's ``smpl:cuts`` declares). ``pool``: worker processes that measure blocks of frames
-    (the same figures).
+    restarts (``motion_restarts``: a splice of the joints, one the body layer's ``smpl:cuts``
+    declares), and across a jump of its root alone (a teleport, a snapped heading) it is
+    measured with the jump taken out (``jump_maps``). ``pool``: worker processes that measure
+    blocks of frames (the same figures).
 
     Returns:
         The metrics and the ``(T,)`` time codes they refer to.
@@ -101,7 +103,11 @@ def evaluate_layer(
     fps = info.time_codes_per_second / step
     faces = body.faces.numpy()
     parts = face_joints(body.weights.numpy(), faces)
-    # the motion's cuts at the garment's frames: the first at or after each
-    cuts = [j for j in np.searchsorted(idx, motion_cuts(motion)).tolist() if 0 < j < len(idx)]
-    metrics = evaluate_garment(points, vertices, faces, fps, ref, pool, parts, cuts)
+    # The motion's restarts at the garment's frames (the first at or after each); across a jump
+    # of the root alone the acceleration is measured with the jump taken out.
+    restarts = motion_restarts(motion)
+    jumps = root_jumps(motion, body, motion_cuts(motion, restarts), restarts)
+    steady = mapped(jump_maps(motion.num_frames, jumps)[idx], points) if jumps else None
+    cuts = [j for j in np.searchsorted(idx, restarts).tolist() if 0 < j < len(idx)]
+    metrics = evaluate_garment(points, vertices, faces, fps, ref, pool, parts, cuts, steady)
     return metrics, info.time_codes

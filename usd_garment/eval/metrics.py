@@ -126,13 +126,17 @@ def evaluate_garment(
     pool: BodyPool | None = None,
     face_parts: np.ndarray | None = None,
     cuts: Sequence[int] = (),
+    steady: np.ndarray | None = None,
 ) -> GarmentMetrics:
     """Figures of a garment ``(T, N, 3)`` (m) on the posed body ``(T, V, 3)`` with faces
     ``(F, 3)``, sampled at ``fps``; ``reference`` ``(T, N, 3)`` (m) is optional; ``pool``:
     worker processes that measure blocks of frames (the same figures); ``face_parts`` ``(F,)``:
     the SMPL joint of each body face (:func:`face_joints`), to count where the vertices inside
     elsewhere are; ``cuts``: the frames where the motion starts anew
-    (:func:`~usd_garment.motion.cuts.motion_cuts`), around which no acceleration is measured."""
+    (:func:`~usd_garment.motion.cuts.motion_cuts`), around which no acceleration is measured;
+    ``steady`` ``(T, N, 3)`` (m): the garment with the body's jumps of the root alone taken out
+    (:func:`~usd_garment.motion.jumps.jump_maps`), whose acceleration is measured in their
+    place (None: the garment's own)."""
     points = np.asarray(points, dtype=np.float64)
     t_frames, n = points.shape[:2]
     finite = np.isfinite(points).all(axis=-1)  # (T, N)
@@ -153,7 +157,8 @@ def evaluate_garment(
     reference_mm, shift_mm, unshifted_mm = _reference_errors(points, reference)
     acceleration = np.full(t_frames, np.nan)
     if t_frames >= 3:
-        acc = (safe[2:] - 2.0 * safe[1:-1] + safe[:-2]) * fps**2
+        moving = safe if steady is None else np.where(finite[..., None], steady, 0.0)
+        acc = (moving[2:] - 2.0 * moving[1:-1] + moving[:-2]) * fps**2
         ok = finite[2:] & finite[1:-1] & finite[:-2]
         norm = np.where(ok, np.linalg.norm(acc, axis=-1), np.nan)
         acceleration[1:-1] = np.nanmean(np.where(ok.any(axis=1)[:, None], norm, 0.0), axis=1)
