@@ -482,6 +482,44 @@ def test_a_motion_that_starts_running_keeps_the_garment_on() -> None:
     assert max(check.max_distance for check in method.result.checks) <= limit
 
 
+def test_a_teleport_within_one_motion_is_simulated_as_the_motion_moved() -> None:
+    """A body walking 1 m/s that teleports 0.5 m and turns 90° about the up axis at frame 3 (a
+    jump of the root alone, ``root_cuts``) is simulated with the jump taken out and the garment
+    put back after: the garment is the jump-free motion's before the jump and that garment
+    moved after it (left to the cloth, a 0.5 m step in one frame leaves it behind: "fell
+    off")."""
+    import torch
+    from scipy.spatial.transform import Rotation
+
+    from usd_garment.body.io import load_body_model
+    from usd_garment.garment.library import load_template
+    from usd_garment.methods.simulation import SimulationMethod
+    from usd_garment.motion.cuts import root_cuts
+    from usd_garment.motion.sequence import SmplMotion
+
+    pose = np.zeros((6, 24, 3), np.float32)
+    pose[:, 16, 2], pose[:, 17, 2] = -1.2, 1.2
+    trans = np.zeros((6, 3), np.float32)
+    trans[:, 2] = np.arange(6) / 30.0
+    free = SmplMotion(np.zeros(10, np.float32), pose, trans, 30.0)
+    turn = Rotation.from_rotvec([0.0, np.pi / 2, 0.0])
+    body, template = load_body_model(None), load_template("tshirt", "low")
+    pelvis = body.shaped(torch.zeros(1, 10))[1][0, 0].double().numpy()
+    jumped_pose, jumped_trans = pose.copy(), trans.copy()
+    jumped_pose[3:, 0] = turn.as_rotvec()
+    # the body turned about its pelvis at frame 3 and moved 0.5 m: R(x - J0) + J0 + t turned
+    jumped_trans[3:] = turn.apply(trans[3:] + pelvis) - pelvis + np.array([0.5, 0.0, 0.0])
+    jumped = SmplMotion(free.betas, jumped_pose, jumped_trans, 30.0)
+    assert root_cuts(jumped) == (3,)
+    method = SimulationMethod(lead_in=4, settle=2, max_substeps=4)
+    got = method.predict(jumped, body, template)
+    assert method.result is not None and method.result.ok
+    want = method.predict(free, body, template)
+    np.testing.assert_allclose(got[:3], want[:3], atol=1e-3)
+    moved = turn.apply(want[3:].reshape(-1, 3)).reshape(3, -1, 3) + np.array([0.5, 0.0, 0.0])
+    np.testing.assert_allclose(got[3:], moved, atol=1e-3)  # 0.2 mm here
+
+
 def test_body_parts_are_closed_colliders() -> None:
     """Each body part's collider is closed over its holes; the parts fill the body."""
     from usd_garment.sim.cloth import _closed_part

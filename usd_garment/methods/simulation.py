@@ -20,6 +20,8 @@ from usd_garment.garment.library import find_draped
 from usd_garment.garment.template import GarmentTemplate
 from usd_garment.methods.base import Progress
 from usd_garment.methods.lbs import nearest_body_vertex
+from usd_garment.motion.cuts import motion_cuts, motion_restarts
+from usd_garment.motion.jumps import jump_maps, mapped, root_jumps, without_jumps
 from usd_garment.motion.sequence import SmplMotion
 from usd_garment.sim.checks import CheckLimits
 from usd_garment.sim.cloth import (
@@ -270,7 +272,10 @@ class SimulationMethod:
         template: GarmentTemplate,
         progress: Progress | None = None,
     ) -> np.ndarray:
-        """Simulated garment points ``(T, N, 3)`` float32, canonical frame (m).
+        """Simulated garment points ``(T, N, 3)`` float32, canonical frame (m). Across a jump
+        of the root alone (``usd_garment.motion.jumps``) the body is simulated with the jump
+        taken out and the garment put back after, so the cloth goes on as on the motion
+        without the jump, moved; ``result`` holds the garment as simulated.
 
         Raises:
             SimulationError: a frame had NaNs or a vertex farther than the limits allow from
@@ -288,6 +293,11 @@ class SimulationMethod:
         if start.vertices.shape != template.vertices.shape:
             raise ValueError("the start shape and the template have different vertex counts")
         self.garment_limits = CheckLimits.for_garment(template.name)
+        # A jump of the root alone (a teleport within one motion) would leave the cloth behind:
+        # the body is simulated without it, and the garment moved back with it after.
+        restarts = motion_restarts(motion)
+        jumps = root_jumps(motion, body, motion_cuts(motion, restarts), restarts)
+        motion = without_jumps(motion, jumps, body)
         rest, lead, root = lead_in_bodies(body, motion, self.lead_in, self.settle)
         frames = _posed(body, motion.betas, motion.pose, motion.trans)
         warmup = self.lead_in + self.settle
@@ -325,7 +335,10 @@ class SimulationMethod:
         )
         if not self.result.ok:
             raise SimulationError(f"simulation failed at {self.result.message}")
-        return self.result.points
+        if not jumps:
+            return self.result.points
+        back = np.linalg.inv(jump_maps(motion.num_frames, jumps))
+        return mapped(back, self.result.points).astype(np.float32)
 
 
 def _rounded(values: list[float], digits: int) -> list[float | None]:
