@@ -33,14 +33,17 @@ pytest.importorskip("newton")
 
 def _arms_down(frames: int, jump_at: int | None = None) -> SmplMotion:
     """Both arms lowered from the T-pose by up to 0.3 rad; with ``jump_at`` the body is
-    teleported 2 m sideways from that frame on (no garment can follow)."""
+    teleported 2 m sideways from that frame on, where the animation declares a cut: another
+    motion starts there, which the simulation goes straight through, and no garment can follow
+    (undeclared, the teleport is one motion moved, and simulated as that: ``tests/test_sim.py``)."""
     w = np.linspace(0.0, 0.3, frames, dtype=np.float32)
     pose = np.zeros((frames, 24, 3), dtype=np.float32)
     pose[:, 16, 2], pose[:, 17, 2] = -w, w
     trans = np.zeros((frames, 3), dtype=np.float32)
-    if jump_at is not None:
-        trans[jump_at:, 0] = 2.0
-    return SmplMotion(np.zeros(10, np.float32), pose, trans, 30.0)
+    if jump_at is None:
+        return SmplMotion(np.zeros(10, np.float32), pose, trans, 30.0)
+    trans[jump_at:, 0] = 2.0
+    return SmplMotion(np.zeros(10, np.float32), pose, trans, 30.0, cut_times=(float(jump_at),))
 
 
 def _run(args: list[object]) -> tuple[int, str]:
