@@ -520,6 +520,33 @@ def test_a_teleport_within_one_motion_is_simulated_as_the_motion_moved() -> None
     np.testing.assert_allclose(got[3:], moved, atol=1e-3)  # 0.2 mm here
 
 
+def test_a_restart_is_simulated_from_a_lead_in_of_its_own() -> None:
+    """Two clips joined end to end with the cut declared (a restart: another motion starts) are
+    simulated as each clip alone, the second from a lead-in of its own: the same garment, frame
+    for frame, and the runs' checks and lead-ins in order in one result."""
+    from usd_garment.body.io import load_body_model
+    from usd_garment.garment.library import load_template
+    from usd_garment.methods.simulation import SimulationMethod
+    from usd_garment.motion.cuts import motion_restarts
+    from usd_garment.motion.sequence import SmplMotion
+
+    pose = np.zeros((6, 24, 3), np.float32)
+    pose[:3, 16, 2], pose[:3, 17, 2] = -1.2, 1.2  # arms half lowered
+    pose[3:, 16, 2], pose[3:, 17, 2] = -0.3, 0.3  # then nearly in the T-pose
+    trans = np.zeros((6, 3), np.float32)
+    trans[:, 2] = np.arange(6) / 30.0
+    joined = SmplMotion(np.zeros(10, np.float32), pose, trans, 30.0, cut_times=(3.0,))
+    assert motion_restarts(joined) == (3,)
+    body, template = load_body_model(None), load_template("tshirt", "low")
+    method = SimulationMethod(lead_in=4, settle=2, max_substeps=4)
+    got = method.predict(joined, body, template)
+    assert method.result is not None and method.result.ok
+    assert len(method.result.checks) == 6 and len(method.result.lead_in_checks) == 2 * 6
+    first = method.predict(SmplMotion(joined.betas, pose[:3], trans[:3], 30.0), body, template)
+    second = method.predict(SmplMotion(joined.betas, pose[3:], trans[3:], 30.0), body, template)
+    np.testing.assert_array_equal(got, np.concatenate([first, second]))
+
+
 def test_body_parts_are_closed_colliders() -> None:
     """Each body part's collider is closed over its holes; the parts fill the body."""
     from usd_garment.sim.cloth import _closed_part

@@ -6,6 +6,7 @@ and stay outside the rest body."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -31,19 +32,18 @@ from usd_garment.usd.schema import read_garment
 pytest.importorskip("newton")
 
 
-def _arms_down(frames: int, jump_at: int | None = None) -> SmplMotion:
-    """Both arms lowered from the T-pose by up to 0.3 rad; with ``jump_at`` the body is
-    teleported 2 m sideways from that frame on, where the animation declares a cut: another
-    motion starts there, which the simulation goes straight through, and no garment can follow
-    (undeclared, the teleport is one motion moved, and simulated as that: ``tests/test_sim.py``)."""
+def _arms_down(frames: int, dash_at: int | None = None) -> SmplMotion:
+    """Both arms lowered from the T-pose by up to 0.3 rad; with ``dash_at`` the body dashes
+    sideways from that frame on at 30 m/s, 1 m a frame: no garment can follow, and no single
+    step stands out from the steps beside it, so the motion has no cut (a teleport or a
+    declared cut would be simulated as one motion moved, or from a lead-in of its own)."""
     w = np.linspace(0.0, 0.3, frames, dtype=np.float32)
     pose = np.zeros((frames, 24, 3), dtype=np.float32)
     pose[:, 16, 2], pose[:, 17, 2] = -w, w
     trans = np.zeros((frames, 3), dtype=np.float32)
-    if jump_at is None:
-        return SmplMotion(np.zeros(10, np.float32), pose, trans, 30.0)
-    trans[jump_at:, 0] = 2.0
-    return SmplMotion(np.zeros(10, np.float32), pose, trans, 30.0, cut_times=(float(jump_at),))
+    if dash_at is not None:
+        trans[dash_at:, 0] = np.arange(1, frames - dash_at + 1)
+    return SmplMotion(np.zeros(10, np.float32), pose, trans, 30.0)
 
 
 def _run(args: list[object]) -> tuple[int, str]:
@@ -127,16 +127,21 @@ def test_bad_frames_are_kept_and_flagged_unless_strict(
 
 
 def test_failed_simulation_writes_nothing(tmp_path: Path) -> None:
+    """A body that dashes off at frame 3 fails the simulation with one clear line naming that
+    frame of the motion, though a declared cut at frame 1 makes it the second run's frame 2
+    (each run between restarts is simulated from a lead-in of its own); nothing is written,
+    and the input is left as it was."""
     folder = tmp_path / "in"
     folder.mkdir()
     body_path = folder / "body.usdc"
-    write_body_layer(body_path, _arms_down(4, jump_at=2), load_body_model(None))
+    dashing = replace(_arms_down(6, dash_at=3), cut_times=(1.0,))
+    write_body_layer(body_path, dashing, load_body_model(None))
     out = tmp_path / "out" / "sim.usdc"
     out.parent.mkdir()
     code, output = _run(["simulate", body_path, "-o", out, "--lod", "low"])
     assert code != 0
     error = [line for line in output.splitlines() if line.startswith("Error")]
-    assert len(error) == 1 and "simulation failed at motion frame 2" in error[0], output
+    assert len(error) == 1 and "simulation failed at motion frame 3" in error[0], output
     assert "Traceback" not in output
     assert list(out.parent.iterdir()) == [] and list(folder.iterdir()) == [body_path]
 

@@ -6,7 +6,8 @@ inside the body where the pose does not force it, far from it, stretch).
 
 from __future__ import annotations
 
-from dataclasses import asdict
+import itertools
+from dataclasses import asdict, replace
 from typing import Any
 
 import numpy as np
@@ -178,7 +179,8 @@ class SimulationMethod:
     committed or cached one for this body, else draped on the spot) graded by the same offsets,
     on the motion's body shape in the T-pose, which eases into the first frame's pose over
     ``lead_in`` frames and holds it for ``settle`` frames, its root coming up to the motion's
-    first velocity over both (:func:`lead_in_bodies`), then plays the motion. Frames that fail
+    first velocity over both (:func:`lead_in_bodies`), then plays the motion; so again at each
+    restart, where another motion starts (see :meth:`predict`). Frames that fail
     their checks even with ``max_substeps`` are kept and flagged (``strict``: the first one
     fails the sequence); NaN, a garment that fell off or more than ``max_bad_run`` bad frames
     in a row raise :class:`SimulationError`. After ``predict``, ``result`` holds the
@@ -272,7 +274,10 @@ class SimulationMethod:
         template: GarmentTemplate,
         progress: Progress | None = None,
     ) -> np.ndarray:
-        """Simulated garment points ``(T, N, 3)`` float32, canonical frame (m). Across a jump
+        """Simulated garment points ``(T, N, 3)`` float32, canonical frame (m). Each run
+        between the motion's restarts (``motion_restarts``: a splice of the joints, a declared
+        cut, where another motion starts) is simulated from a lead-in of its own, as that
+        motion alone would be; ``result`` joins the runs' (``SimResult.joined``). Across a jump
         of the root alone (``usd_garment.motion.jumps``) the body is simulated with the jump
         taken out and the garment put back after, so the cloth goes on as on the motion
         without the jump, moved; ``result`` holds the garment as simulated.
@@ -293,10 +298,40 @@ class SimulationMethod:
         if start.vertices.shape != template.vertices.shape:
             raise ValueError("the start shape and the template have different vertex counts")
         self.garment_limits = CheckLimits.for_garment(template.name)
-        # A jump of the root alone (a teleport within one motion) would leave the cloth behind:
-        # the body is simulated without it, and the garment moved back with it after.
+        # Each run between restarts (where another motion starts) from its own lead-in, as a
+        # motion of its own.
         restarts = motion_restarts(motion)
-        jumps = root_jumps(motion, body, motion_cuts(motion, restarts), restarts)
+        cuts = motion_cuts(motion, restarts)
+        runs: list[SimResult] = []
+        points: list[np.ndarray] = []
+        for a, b in itertools.pairwise((0, *restarts, motion.num_frames)):
+            run = _frames(motion, a, b)
+            inner = [k - a for k in cuts if a < k < b]  # jumps of the root alone only
+            result, garment = self._run(run, inner, body, template, start, a, progress)
+            runs.append(result)
+            if not result.ok:
+                break
+            points.append(garment)
+        self.result = runs[0] if len(runs) == 1 else SimResult.joined(runs)
+        if not self.result.ok:
+            raise SimulationError(f"simulation failed at {self.result.message}")
+        return points[0] if len(points) == 1 else np.concatenate(points)
+
+    def _run(
+        self,
+        motion: SmplMotion,
+        cuts: list[int],
+        body: BodyModel,
+        template: GarmentTemplate,
+        start: GarmentTemplate,
+        first: int,
+        progress: Progress | None,
+    ) -> tuple[SimResult, np.ndarray]:
+        """One run of a motion with no restart in it (its frames ``first`` on), simulated from
+        the lead-in: its result and its garment ``(T, N, 3)`` float32 (m). A jump of the root
+        alone among its ``cuts`` (a teleport within one motion) would leave the cloth behind:
+        the body is simulated without it, and the garment moved back with it after."""
+        jumps = root_jumps(motion, body, cuts, ())
         motion = without_jumps(motion, jumps, body)
         rest, lead, root = lead_in_bodies(body, motion, self.lead_in, self.settle)
         frames = _posed(body, motion.betas, motion.pose, motion.trans)
@@ -304,14 +339,14 @@ class SimulationMethod:
 
         def report(done: int, total: int) -> None:
             if progress is not None and done > warmup:
-                progress(done - warmup)
+                progress(first + done - warmup)
 
         # The rest shape and the start are graded by the same per-vertex offsets, so the draped
         # start on the shaped T-pose body matches the graded rest lengths from the first frame.
         offsets = shape_offsets(body, template.vertices, motion.betas)
         graded = template.vertices + offsets
         initial = np.asarray(start.vertices, np.float64) + offsets + root
-        self.result = simulate_sequence(
+        result = simulate_sequence(
             graded,
             template.faces,
             body.faces.numpy(),
@@ -332,13 +367,23 @@ class SimulationMethod:
             initial_vertices=initial,
             body_parts=collider_parts(body) if self.split_colliders else None,
             release=arm_release(body, template),
+            first_frame=first,
         )
-        if not self.result.ok:
-            raise SimulationError(f"simulation failed at {self.result.message}")
-        if not jumps:
-            return self.result.points
+        if not result.ok or not jumps:
+            return result, result.points
         back = np.linalg.inv(jump_maps(motion.num_frames, jumps))
-        return mapped(back, self.result.points).astype(np.float32)
+        return result, mapped(back, result.points).astype(np.float32)
+
+
+def _frames(motion: SmplMotion, start: int, stop: int) -> SmplMotion:
+    """The frames ``start`` to ``stop`` of ``motion`` as a motion of their own (``motion``
+    itself where that is all of it), with no declared cut."""
+    if start == 0 and stop == motion.num_frames:
+        return motion
+    return replace(
+        motion, pose=motion.pose[start:stop], trans=motion.trans[start:stop],
+        time_codes=motion.time_codes[start:stop], cut_times=(),
+    )  # fmt: skip
 
 
 def _rounded(values: list[float], digits: int) -> list[float | None]:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import contextlib
 import io
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -502,6 +502,28 @@ class SimResult:
         """Motion and lead-in frames that failed their checks with the most substeps."""
         return int(sum(self.bad) + sum(self.lead_in_bad))
 
+    @classmethod
+    def joined(cls, runs: Sequence[SimResult]) -> SimResult:
+        """The results of consecutive runs of one motion, each simulated from its own lead-in,
+        as one: their motion frames and checks in order, every run's lead-in checks, the mean
+        time per simulated frame over them all, and the last run's status (a failed run is
+        the last one simulated)."""
+        simulated = [len(r.lead_in_checks) + len(r.checks) for r in runs]
+        seconds = sum(r.seconds_per_frame * n for r, n in zip(runs, simulated, strict=True))
+        return cls(
+            points=np.concatenate([r.points for r in runs]),
+            checks=[c for r in runs for c in r.checks],
+            substeps=[k for r in runs for k in r.substeps],
+            bad=[b for r in runs for b in r.bad],
+            projected=[p for r in runs for p in r.projected],
+            released=[b for r in runs for b in r.released],
+            lead_in_checks=[c for r in runs for c in r.lead_in_checks],
+            lead_in_bad=[b for r in runs for b in r.lead_in_bad],
+            seconds_per_frame=seconds / max(sum(simulated), 1),
+            status=runs[-1].status,
+            message=runs[-1].message,
+        )
+
 
 def easing(count: int) -> np.ndarray:
     """``(count,)`` weights rising from near 0 to 1 at the last along a smoothstep, 3s² − 2s³ of
@@ -551,6 +573,7 @@ def simulate_sequence(
     initial_vertices: np.ndarray | None = None,
     body_parts: np.ndarray | None = None,
     release: ContactRelease | None = None,
+    first_frame: int = 0,
 ) -> SimResult:
     """Simulate a garment through a body motion, checking every frame.
 
@@ -593,6 +616,8 @@ def simulate_sequence(
         body_parts: ``(Fb,)`` part label per body triangle, one collider each (see
             ``GarmentSimulator``); the frame checks always use the whole body.
         release: the body contacts that ``contact.release`` drops; none when None.
+        first_frame: the motion frame that ``body_frames[0]`` is (a run of a longer motion),
+            by which a failure names its frame.
 
     Returns:
         The ``SimResult``; check ``ok`` before using ``points``, and ``bad`` for the frames
@@ -682,7 +707,11 @@ def simulate_sequence(
             stop = f"{bad_run} bad frames in a row, the last with {', '.join(reasons)}"
             stop += check.forced_note()
         if stop:
-            stage = f"motion frame {index - len(warmup)}" if in_motion else f"lead-in frame {index}"
+            stage = f"lead-in frame {index}"
+            if in_motion:
+                stage = f"motion frame {first_frame + index - len(warmup)}"
+            elif first_frame:
+                stage += f" before motion frame {first_frame}"
             if not in_motion:  # the failing frame's check goes with the motion's too
                 result.checks.append(check)
                 result.substeps.append(tries)
