@@ -68,7 +68,8 @@ def root_jumps(
     """The jumps of the root alone of ``motion`` on ``body``: its ``cuts`` that are not
     ``restarts`` (frames; ``motion_cuts`` and ``motion_restarts``), each with the map that
     takes it out (:meth:`RootJump.at`)."""
-    frames = [k for k in cuts if k not in set(restarts)]
+    starts = set(restarts)
+    frames = [k for k in cuts if k not in starts]
     if not frames:
         return ()
     root = root_transforms(motion, body)
