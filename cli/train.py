@@ -16,6 +16,7 @@ from tqdm import tqdm
 
 from usd_garment.cli.errors import user_errors
 from usd_garment.cli.motion import corpus_options, read_corpus
+from usd_garment.methods.weight_storage import STORAGES
 
 if TYPE_CHECKING:
     from usd_garment.body.model import BodyModel
@@ -310,6 +311,19 @@ def _smoothing_option(name: str, what: str) -> Callable[[F], F]:
     )
 
 
+def _weights_option(f: F) -> F:
+    """A ``train combine`` / ``train member`` option: how the written model stores its
+    weights."""
+    return click.option(
+        "--weights",
+        type=click.Choice(STORAGES),
+        default=STORAGES[0],
+        show_default=True,
+        help="How the learned weights are stored: float16, or int8 with a scale per row (about "
+        "half the file again: room for more members in a shipped model's 12 MB).",
+    )(f)
+
+
 @train.command("combine", short_help="Average several trained models into one (an ensemble).")
 @click.argument("models", nargs=-1, required=True, type=click.Path(file_okay=False, path_type=Path))
 @click.option(
@@ -326,12 +340,14 @@ def _smoothing_option(name: str, what: str) -> Callable[[F], F]:
 )
 @_smoothing_option("--latent-smoothing", "the latent codes in time before decoding")
 @_smoothing_option("--posed-smoothing", "the posed garment in time before any push-out")
+@_weights_option
 def combine(
     models: tuple[Path, ...],
     out: Path,
     version: str | None,
     latent_smoothing: float,
     posed_smoothing: float,
+    weights: str,
 ) -> None:
     """One model whose garment is the mean of the canonical garments of MODELS (trained on the
     same garment and body, e.g. with other seeds): each model's networks run, their decodings
@@ -353,9 +369,10 @@ def combine(
         model = combine_models(list(models), version, latent_smoothing, posed_smoothing)
         model.info["command"] = "usd-garment " + shlex.join(
             ["train", "combine", *map(str, models), "--out", str(out), "--version", model.version,
-             "--latent-smoothing", str(latent_smoothing), "--posed-smoothing", str(posed_smoothing)]
+             "--latent-smoothing", str(latent_smoothing), "--posed-smoothing", str(posed_smoothing),
+             "--weights", weights]
         )  # fmt: skip
-        save_learned_model(out, model)
+        save_learned_model(out, model, weights)
         records = copy_member_records(list(models), out)
     click.echo(f"wrote the model {out}: {len(model.members)} members, {records} curves and logs")
 
@@ -369,7 +386,8 @@ def combine(
     required=True,
     help="Model directory to write; created, and not MODEL.",
 )
-def member(model: Path, index: int, out: Path) -> None:
+@_weights_option
+def member(model: Path, index: int, out: Path, weights: str) -> None:
     """Member INDEX of the ensemble MODEL as a one-member model, to dress or bench it alone
     (e.g. `bench --model m0=DIR`): its networks and training record, version
     '{version}-member{index}'; its training curves and log are copied as curves.png and
@@ -386,9 +404,10 @@ def member(model: Path, index: int, out: Path) -> None:
             raise click.BadParameter(f"{out} is the model itself", param_hint="--out")
         one = member_model(load_learned_model(model), index)
         one.info["command"] = "usd-garment " + shlex.join(
-            ["train", "member", str(model), "--index", str(index), "--out", str(out)]
-        )
-        save_learned_model(out, one)
+            ["train", "member", str(model), "--index", str(index), "--out", str(out),
+             "--weights", weights]
+        )  # fmt: skip
+        save_learned_model(out, one, weights)
         records = copy_member_record(model, index, out)
     click.echo(f"wrote the model {out}: member {index} of {model}, {records} curves and logs")
 

@@ -425,3 +425,37 @@ def test_a_model_of_the_first_layout_still_loads(tmp_path, body, template):
     with torch.no_grad():  # the weights were stored in float16
         torch.testing.assert_close(old.decode(z), new.decode(z), atol=2e-4, rtol=0)
     assert len(old.members) == 1 and old.members[0].info == {}
+
+
+def test_an_ensemble_stored_in_int8_is_smaller_and_decodes_as_its_members(tmp_path, body, template):
+    first, second = _members(tmp_path, body, template)
+    half, quarter = tmp_path / "float16", tmp_path / "int8"
+    assert _run(["train", "combine", first, second, "--out", half])[0] == 0
+    code, output = _run(["train", "combine", first, second, "--out", quarter, "--weights", "int8"])
+    assert code == 0, output
+    info = json.loads((quarter / "model.json").read_text())
+    assert (info["format"], info["weights"]) == (3, "int8") and "--weights int8" in info["command"]
+    assert json.loads((half / "model.json").read_text())["format"] == 2
+    learned = sum(p.numel() for m in load_learned_model(half).members for p in m.vae.parameters())
+    saved = (half / "weights.safetensors").stat().st_size
+    assert (quarter / "weights.safetensors").stat().st_size < saved - learned // 2
+
+    a, b = load_learned_model(half, body), load_learned_model(quarter, body)
+    z = torch.randn(6, 50, generator=torch.Generator().manual_seed(1))
+    with torch.no_grad():  # the canonical garment moves by far less than a millimetre
+        assert 0 < (a.decode(z) - b.decode(z)).abs().max() < 3e-4
+    motion = make_motion("walk", 8, 30.0, seed=2, body=body)
+    torch.testing.assert_close(
+        predict_latents(b, motion), predict_latents(a, motion), atol=0.05, rtol=0
+    )
+
+    one = tmp_path / "member0"
+    assert _run(["train", "member", quarter, "--index", "0", "--out", one])[0] == 0
+    assert json.loads((one / "model.json").read_text())["format"] == 2  # float16 by default
+
+    tensors = load_file(str(quarter / "weights.safetensors"))
+    name = next(k for k in tensors if k.endswith("#scale"))
+    tensors[name] = tensors[name][:-1]
+    save_file(tensors, str(quarter / "weights.safetensors"))
+    with pytest.raises(ModelError, match="model files do not match"):
+        load_learned_model(quarter)

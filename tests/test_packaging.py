@@ -37,3 +37,12 @@ def test_every_data_file_is_package_data() -> None:
         if not any(fnmatch.fnmatch(f, p) and f.count("/") == p.count("/") for p in patterns)
     ]
     assert missing == [], "add these to [tool.setuptools.package-data]"
+
+
+def test_each_shipped_model_fits_in_12_mb() -> None:
+    """Issue 11: a shipped default model takes at most 12 MB in the repository (weights,
+    model.json, figures, its members' curves and logs)."""
+    models = [p for p in (ROOT / "usd_garment" / "data" / "models").iterdir() if p.is_dir()]
+    assert {p.name for p in models} >= {"tshirt", "dress"}
+    sizes = {p.name: sum(f.stat().st_size for f in p.rglob("*") if f.is_file()) for p in models}
+    assert all(size <= 12_000_000 for size in sizes.values()), sizes

@@ -36,17 +36,20 @@ from usd_garment.atomic import atomic_output
 from usd_garment.body.fingerprint import model_fingerprint
 from usd_garment.body.model import BodyModel
 from usd_garment.generative.vae import GarmentVAE
+from usd_garment.methods.weight_storage import restored, stored
 from usd_garment.regressor.gru import GarmentRegressor
 from usd_garment.regressor.pose_code import PoseCodec
 
-#: Version of the directory layout: 2 has a list of members; 1 (one member, the networks'
-#: architectures under "architecture" and their weights unprefixed) is still read.
-MODEL_FORMAT = 2
-READ_FORMATS = (1, 2)
+#: Version of the directory layout by the storage of its weights: 2 has a list of members and
+#: float16 weights; 3 is 2 with int8 weights and their row scales (``weight_storage``); 1 (one
+#: member, the networks' architectures under "architecture" and their weights unprefixed) is
+#: still read.
+MODEL_FORMATS = {"float16": 2, "int8": 3}
+READ_FORMATS = (1, 2, 3)
 #: The keys of ``model.json`` that describe the layout rather than the model's history.
 _LAYOUT_KEYS = frozenset(
-    ("format", "garment", "lod", "vertices", "version", "body", "architecture", "members",
-     "latent_smoothing_s", "posed_smoothing_s")
+    ("format", "weights", "garment", "lod", "vertices", "version", "body", "architecture",
+     "members", "latent_smoothing_s", "posed_smoothing_s")
 )  # fmt: skip
 #: The keys of ``model.json`` that hold smoothings in time (s); a model written before one was
 #: added has none (0).
@@ -145,15 +148,19 @@ class LearnedModel:
             )
 
 
-def save_learned_model(
-    path: str | Path, model: LearnedModel, weights_dtype: torch.dtype = torch.float16
-) -> None:
+def save_learned_model(path: str | Path, model: LearnedModel, weights: str = "float16") -> None:
     """Write ``model`` into the directory ``path`` (created; other files there are kept): the
     weights, then ``model.json``, each written to a temporary file and renamed.
 
-    Learned parameters are stored as ``weights_dtype`` (half the size in float16); buffers (the
-    normalisation statistics, in metres) stay float32. Loading casts everything to float32.
+    Learned parameters are stored as ``weights`` (one of ``weight_storage.STORAGES``: float16,
+    half the size of float32; int8, about a quarter); buffers (the normalisation statistics, in
+    metres) stay float32. Loading gives everything as float32.
+
+    Raises:
+        ValueError: an unknown ``weights``.
     """
+    if weights not in MODEL_FORMATS:
+        raise ValueError(f"weights are stored as {' or '.join(MODEL_FORMATS)}, not '{weights}'")
     path = Path(path)
     path.mkdir(parents=True, exist_ok=True)
     tensors = {}
@@ -161,10 +168,12 @@ def save_learned_model(
         for name, part in member.parts().items():
             parameters = {key for key, _ in part.named_parameters()}
             for key, value in part.state_dict().items():
-                value = value.detach().cpu()
+                value, full = value.detach().cpu(), f"{index}.{name}.{key}"
                 if key in parameters and value.is_floating_point():
-                    value = value.to(weights_dtype)
-                tensors[f"{index}.{name}.{key}"] = value.contiguous()
+                    tensors.update(stored(full, value, weights))
+                else:
+                    tensors[full] = value
+    tensors = {key: value.contiguous() for key, value in tensors.items()}
     with atomic_output(path / WEIGHTS_NAME) as tmp:
         save_file(tensors, str(tmp))
     members = [
@@ -173,7 +182,8 @@ def save_learned_model(
         for member in model.members
     ]
     config = {
-        "format": MODEL_FORMAT,
+        "format": MODEL_FORMATS[weights],
+        "weights": weights,
         "garment": model.garment,
         "lod": model.lod,
         "vertices": model.vertices,
@@ -227,6 +237,7 @@ def load_learned_model(path: str | Path, body: BodyModel | None = None) -> Learn
         else:
             entries = config["members"]
             prefixes = [f"{index}." for index in range(len(entries))]
+        tensors = restored(tensors)
         members = [
             _load_member(entry, tensors, prefix)
             for entry, prefix in zip(entries, prefixes, strict=True)
@@ -264,16 +275,12 @@ def _check_smoothing(seconds: float, where: str = "", key: str = "latent_smoothi
 
 def _load_member(entry: dict[str, Any], tensors: dict[str, torch.Tensor], prefix: str) -> Member:
     """The member that ``model.json``'s ``entry`` describes, its weights those of ``tensors``
-    under ``prefix`` (cast to float32)."""
+    (restored to float32: ``weight_storage.restored``) under ``prefix``."""
     parts = {}
     for name, cls in PARTS.items():
         part = cls.from_config(entry["architecture"][name])
         head = f"{prefix}{name}."
-        state = {
-            k[len(head) :]: v.float() if v.is_floating_point() else v
-            for k, v in tensors.items()
-            if k.startswith(head)
-        }
+        state = {k[len(head) :]: v for k, v in tensors.items() if k.startswith(head)}
         part.load_state_dict(state)
         parts[name] = part.eval()
     info = {k: v for k, v in entry.items() if k != "architecture"}
