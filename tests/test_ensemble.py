@@ -459,3 +459,31 @@ def test_an_ensemble_stored_in_int8_is_smaller_and_decodes_as_its_members(tmp_pa
     save_file(tensors, str(quarter / "weights.safetensors"))
     with pytest.raises(ModelError, match="model files do not match"):
         load_learned_model(quarter)
+
+
+def test_capture_members_script_trains_two_members_and_joins_five_in_int8(tmp_path):
+    """``examples/train/capture_members.sh`` (the T-shirt's version 10): one base, each seed's
+    three regressor steps from it, the kept model's members, the five joined as int8."""
+    from tests.script_calls import script_calls
+
+    kept = tmp_path / "v9"
+    kept.mkdir()
+    (kept / "model.json").write_text(json.dumps({"members": [{}, {}, {}]}))
+    calls = script_calls("capture_members.sh", str(kept), "out", "d", "c", tmp_path=tmp_path)
+    trains = [c for c in calls if c[1] in ("all", "regressor")]
+    assert trains[0][:4] == ["train", "all", "--data", "d/canonical_tshirt_v4c.npz"]
+    regressors = trains[1:]
+    assert len(regressors) == 6
+    steps = [(seed, step) for seed in (0, 1) for step in ("J0", "J1", "J")]
+    for call, (seed, step) in zip(regressors, steps, strict=True):
+        value = dict(zip(call[2::2], call[3::2], strict=False))
+        assert value["--data"] == "c/canonical_tshirt_v4c.npz" and value["--seed"] == str(seed)
+        assert value["--out"] == f"scratch/runs_cap/cap_{step}_s{seed}"
+        fine_tuned = step != "J0"
+        assert ("--planes" in value) == fine_tuned and ("--init-from" in value) == fine_tuned
+    assert [c[2] for c in calls if c[1] == "member"] == [str(kept)] * 3
+    (combine,) = [c for c in calls if c[1] == "combine"]
+    assert combine[2:7] == [f"scratch/runs_cap/kept_m{i}" for i in range(3)] + [
+        "scratch/runs_cap/cap_J_s0", "scratch/runs_cap/cap_J_s1"]  # fmt: skip
+    assert combine[combine.index("--weights") + 1] == "int8"
+    assert combine[combine.index("--out") + 1] == "out"
