@@ -36,7 +36,7 @@ from usd_garment.atomic import atomic_output
 from usd_garment.body.fingerprint import model_fingerprint
 from usd_garment.body.model import BodyModel
 from usd_garment.generative.vae import GarmentVAE
-from usd_garment.methods.weight_storage import restored, stored
+from usd_garment.methods.weight_storage import check_storage, restored, stored
 from usd_garment.regressor.gru import GarmentRegressor
 from usd_garment.regressor.pose_code import PoseCodec
 
@@ -159,8 +159,7 @@ def save_learned_model(path: str | Path, model: LearnedModel, weights: str = "fl
     Raises:
         ValueError: an unknown ``weights``.
     """
-    if weights not in MODEL_FORMATS:
-        raise ValueError(f"weights are stored as {' or '.join(MODEL_FORMATS)}, not '{weights}'")
+    check_storage(weights)
     path = Path(path)
     path.mkdir(parents=True, exist_ok=True)
     tensors = {}

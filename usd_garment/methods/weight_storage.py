@@ -20,6 +20,12 @@ SCALE_SUFFIX = "#scale"
 _INT8_LIMIT = 127
 
 
+def check_storage(storage: str) -> None:
+    """Raise ``ValueError`` unless ``storage`` is one of :data:`STORAGES`."""
+    if storage not in STORAGES:
+        raise ValueError(f"weights are stored as {' or '.join(STORAGES)}, not '{storage}'")
+
+
 def stored(name: str, value: torch.Tensor, storage: str) -> dict[str, torch.Tensor]:
     """The tensors that store the learned parameter ``value`` (any shape) named ``name``:
     ``{name: float16}``, or for ``storage`` "int8" and two or more dimensions ``{name: int8,
@@ -28,8 +34,7 @@ def stored(name: str, value: torch.Tensor, storage: str) -> dict[str, torch.Tens
     Raises:
         ValueError: an unknown ``storage``.
     """
-    if storage not in STORAGES:
-        raise ValueError(f"weights are stored as {' or '.join(STORAGES)}, not '{storage}'")
+    check_storage(storage)
     if storage == "float16" or value.dim() < 2:
         return {name: value.to(torch.float16)}
     rows = value.detach().float().reshape(value.shape[0], -1)
