@@ -23,21 +23,15 @@ COLLARS=${COLLARS:-rest}
 ASF="$(dirname "$0")/../mocap/asf"
 CAPTURES=$OUT/mocap_amc/usd
 mkdir -p "$CAPTURES"
+source "$(dirname "$0")/sets.sh"  # add_capture, captures_onto_base
 
 # clip:first:end (frames of the file at 120 fps, end exclusive): the whole of 02_05 and 02_10,
 # the first 12 s of 02_06 and 02_07
 captures=()
 for clip in 02_05:0:1854 02_06:0:1440 02_07:0:1440 02_10:0:2645; do
     IFS=: read -r name first end <<<"$clip"
-    usd=$CAPTURES/cmu_${name}.usdc
-    if [ ! -f "$usd" ]; then
-        usd-garment import-bvh "$ASF/$name.amc.xz" -o "$usd" --frames "$first:$end" \
-            --collars "$COLLARS"
-    fi
-    captures+=(--capture "$usd:train")
+    add_capture "$ASF/$name.amc.xz" "$CAPTURES/cmu_${name}.usdc" --frames "$first:$end"
 done
-source "$(dirname "$0")/sets.sh"  # set_of, project_onto, onto_base_copies
-set_of amc4 --motions 0 --shapes 1 --seed 3 "${captures[@]}"
-onto_base_copies amc4
+captures_onto_base amc4
 exit
 }

@@ -28,23 +28,20 @@ MOCAP=${MOCAP:-../shared/mocap}
 EXTRA="$(dirname "$0")/../mocap"
 CAPTURES=$OUT/arms/usd
 mkdir -p "$CAPTURES"
+source "$(dirname "$0")/sets.sh"  # add_capture, set_of, project_onto
 
 # data.sh's clips, frames and names of cmu4, then 131_01 whole
-cmu4=()
+captures=()
 for clip in 13_26:1:3029:cmu_13_26 13_29:1:2400:cmu_13_29_frames0000-2399 \
     14_04:1:760:cmu_14_04 13_39:1:352:cmu_13_39; do
     IFS=: read -r name first last file <<<"$clip"
-    usd=$CAPTURES/$file.usdc
-    [ -f "$usd" ] || usd-garment import-bvh "$EXTRA/cmu_$name.bvh.xz" -o "$usd" \
-        --frames "$first:$last" --collars "$COLLARS" --arm-clearance 0
-    cmu4+=(--capture "$usd:train")
+    add_capture "$EXTRA/cmu_$name.bvh.xz" "$CAPTURES/$file.usdc" --frames "$first:$last" \
+        --arm-clearance 0
 done
-walk=$CAPTURES/cmu_131_01.usdc
-[ -f "$walk" ] || usd-garment import-bvh "$MOCAP/cmu_131_01.bvh" -o "$walk" --collars "$COLLARS" \
-    --arm-clearance 0
+cmu4=("${captures[@]}")
+add_capture "$MOCAP/cmu_131_01.bvh" "$CAPTURES/cmu_131_01.usdc" --arm-clearance 0
 
-source "$(dirname "$0")/sets.sh"  # set_of NAME ARGS..., project_onto FILE NAME
-set_of arms5 --motions 0 --shapes 1 --seed 3 "${cmu4[@]}" --capture "$walk:train"
+set_of arms5 --motions 0 --shapes 1 --seed 3 "${captures[@]}"
 set_of arms4b --motions 0 --shapes 2 --capture-shapes 2 --seed 4 "${cmu4[@]}"
 
 FIRST=$OUT/canonical_${GARMENT}_${LAST}_arms.npz

@@ -24,15 +24,12 @@ COLLARS=${COLLARS:-rest}
 MOCAP="$(dirname "$0")/../mocap/cmu35"
 CAPTURES=$OUT/mocap_cap35/usd
 mkdir -p "$CAPTURES"
+source "$(dirname "$0")/sets.sh"  # add_capture, captures_onto_base
 
 captures=()
 for bvh in "$MOCAP"/cmu_*.bvh.xz; do
-    usd=$CAPTURES/$(basename "$bvh" .bvh.xz).usdc
-    [ -f "$usd" ] || usd-garment import-bvh "$bvh" -o "$usd" --collars "$COLLARS"
-    captures+=(--capture "$usd:train")
+    add_capture "$bvh" "$CAPTURES/$(basename "$bvh" .bvh.xz).usdc"
 done
-source "$(dirname "$0")/sets.sh"  # set_of, project_onto, onto_base_copies
-set_of cap35 --motions 0 --shapes 1 --seed 3 "${captures[@]}"
-onto_base_copies cap35
+captures_onto_base cap35
 exit
 }

@@ -1,5 +1,15 @@
-# Sourced by data.sh, data_amc.sh, data_arms.sh and data_cap35.sh once GARMENT, OUT and COLLARS
-# are set: the steps they repeat, with the training sets' common settings.
+# Sourced by data.sh, data_amc.sh, data_arms.sh and data_cap35.sh: the steps they repeat, with the
+# training sets' common settings. The functions read GARMENT, OUT, COLLARS (and BASE and LAST, set
+# by garment_args.sh) when they are called.
+
+# SOURCE USD [IMPORT-BVH ARGS...]: import the capture SOURCE as the body layer USD (kept where a
+# run before made it) and add it to the array captures as a training capture
+add_capture() {
+    local source=$1 usd=$2
+    shift 2
+    [ -f "$usd" ] || usd-garment import-bvh "$source" -o "$usd" --collars "$COLLARS" "$@"
+    captures+=(--capture "$usd:train")
+}
 
 set_of() {  # NAME ARGS...: make (or finish) the set OUT/dataset_GARMENT_NAME
     local name=$1
@@ -20,4 +30,11 @@ onto_base_copies() {
         [ -f "$file" ] || cp "$BASE/canonical_${GARMENT}_$name.npz" "$file"
         project_onto "$file" "$set"
     done
+}
+
+# NAME: make the set NAME of the array captures (train only, one body shape, seed 3: as cmu4) and
+# add it to OUT's copies of BASE's v4c and LAST
+captures_onto_base() {
+    set_of "$1" --motions 0 --shapes 1 --seed 3 "${captures[@]}"
+    onto_base_copies "$1"
 }
