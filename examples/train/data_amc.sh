@@ -20,14 +20,12 @@ set -euo pipefail
 
 source "$(dirname "$0")/garment_args.sh" "$@"  # GARMENT OUT BASE LAST
 COLLARS=${COLLARS:-rest}
-ASF="$(dirname "$0")/../mocap/asf"
-CAPTURES=$OUT/mocap_amc/usd
-mkdir -p "$CAPTURES"
-source "$(dirname "$0")/sets.sh"  # add_capture, captures_onto_base
+source "$(dirname "$0")/sets.sh"  # captures_in, add_capture, captures_onto_base
+captures_in "$OUT/mocap_amc/usd"
 
 # clip:first:end (frames of the file at 120 fps, end exclusive): the whole of 02_05 and 02_10,
 # the first 12 s of 02_06 and 02_07
-captures=()
+ASF="$(dirname "$0")/../mocap/asf"
 for clip in 02_05:0:1854 02_06:0:1440 02_07:0:1440 02_10:0:2645; do
     IFS=: read -r name first end <<<"$clip"
     add_capture "$ASF/$name.amc.xz" "$CAPTURES/cmu_${name}.usdc" --frames "$first:$end"

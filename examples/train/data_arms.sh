@@ -26,12 +26,10 @@ source "$(dirname "$0")/garment_args.sh" "$@"  # GARMENT OUT BASE LAST
 COLLARS=rest  # the imports' and the sets'
 MOCAP=${MOCAP:-../shared/mocap}
 EXTRA="$(dirname "$0")/../mocap"
-CAPTURES=$OUT/arms/usd
-mkdir -p "$CAPTURES"
-source "$(dirname "$0")/sets.sh"  # add_capture, set_of, project_onto
+source "$(dirname "$0")/sets.sh"  # captures_in, add_capture, set_of, project_onto
+captures_in "$OUT/arms/usd"
 
 # data.sh's clips, frames and names of cmu4, then 131_01 whole
-captures=()
 for clip in 13_26:1:3029:cmu_13_26 13_29:1:2400:cmu_13_29_frames0000-2399 \
     14_04:1:760:cmu_14_04 13_39:1:352:cmu_13_39; do
     IFS=: read -r name first last file <<<"$clip"

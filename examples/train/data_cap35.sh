@@ -21,13 +21,10 @@ set -euo pipefail
 
 source "$(dirname "$0")/garment_args.sh" "$@"  # GARMENT OUT BASE LAST
 COLLARS=${COLLARS:-rest}
-MOCAP="$(dirname "$0")/../mocap/cmu35"
-CAPTURES=$OUT/mocap_cap35/usd
-mkdir -p "$CAPTURES"
-source "$(dirname "$0")/sets.sh"  # add_capture, captures_onto_base
+source "$(dirname "$0")/sets.sh"  # captures_in, add_capture, captures_onto_base
+captures_in "$OUT/mocap_cap35/usd"
 
-captures=()
-for bvh in "$MOCAP"/cmu_*.bvh.xz; do
+for bvh in "$(dirname "$0")"/../mocap/cmu35/cmu_*.bvh.xz; do
     add_capture "$bvh" "$CAPTURES/$(basename "$bvh" .bvh.xz).usdc"
 done
 captures_onto_base cap35

@@ -2,6 +2,14 @@
 # training sets' common settings. The functions read GARMENT, OUT, COLLARS (and BASE and LAST, set
 # by garment_args.sh) when they are called.
 
+# FOLDER: the captures' body layers go in FOLDER (CAPTURES, made here); the array captures starts
+# empty
+captures_in() {
+    CAPTURES=$1
+    mkdir -p "$CAPTURES"
+    captures=()
+}
+
 # SOURCE USD [IMPORT-BVH ARGS...]: import the capture SOURCE as the body layer USD (kept where a
 # run before made it) and add it to the array captures as a training capture
 add_capture() {
