@@ -398,8 +398,9 @@ def test_the_shipped_members_were_trained_with_the_committed_settings(garment: s
     ``examples/train/`` that its command names, the last step's (seed, GRU width, VAE epochs,
     the dress's pose code weighted by the garment, a fine-tuning; defaults elsewhere), with that
     step's ``--seed`` and ``--init-from`` over them as ``train`` applies them."""
+    from usd_garment.cli.train import _settings
     from usd_garment.methods.learned import shipped_model
-    from usd_garment.training.pipeline import STAGES, TrainSettings
+    from usd_garment.training.pipeline import TrainSettings
 
     folder = shipped_model(garment)
     assert folder is not None
@@ -411,15 +412,13 @@ def test_the_shipped_members_were_trained_with_the_committed_settings(garment: s
         found = re.findall(r"--config (examples/train/\S+\.json)", member.info["command"])
         assert found, member.info["command"]
         named.add(found[-1])
-        values = json.loads((root / found[-1]).read_text())
         last = member.info["command"].split("; then ")[-1]
         seed = re.findall(r"--seed (\d+)", last)
-        for stage in STAGES if seed else ():
-            values.setdefault(stage, {})["seed"] = int(seed[-1])
-        for init_from in re.findall(r"--init-from (\S+)", last)[-1:]:
-            values.setdefault("regressor", {})["init_from"] = init_from
-        settings = TrainSettings.from_dict(values)
-        settings.set_device("cpu")
+        init_from = re.findall(r"--init-from (\S+)", last)
+        settings = _settings(
+            folder, root / found[-1], None, (), "cpu",
+            int(seed[-1]) if seed else None, Path(init_from[-1]) if init_from else None,
+        )  # fmt: skip
         # Read back through TrainSettings: records older than a setting get its default.
         recorded = TrainSettings.from_dict(member.info["training"]["settings"])
         assert _run_folder_named(recorded.to_dict()) == _run_folder_named(settings.to_dict()), (
@@ -451,9 +450,8 @@ def test_the_recipe_script_trains_the_shipped_members_steps(garment: str, tmp_pa
         return loaded
 
     last_steps = []
-    for m, member in enumerate(
-        model.members[:3]
-    ):  # the recipe's (capture_members.sh: test_ensemble)
+    recipe_members = model.members[:3]  # the others are capture_members.sh's (test_ensemble)
+    for m, member in enumerate(recipe_members):
         recorded = TrainSettings.from_dict(member.info["training"]["settings"]).to_dict()
         first = calls.pop(0)
         assert first[:2] == ["train", "all"] and first[first.index("--config") + 1].endswith(
