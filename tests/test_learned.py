@@ -713,9 +713,9 @@ def test_posing_workers_stream_the_garment_of_one_process(
 ) -> None:  # fmt: skip
     """``learned+preimage`` with two forked workers (each chunk posed and pushed there while
     this process decodes the next) streams the garment of one process at one thread to the bit
-    (the shipped T-shirt's networks without a posed smoothing), in chunks of the size asked for,
-    in order, with this process's torch threads as they were; a motion of fewer than two chunks
-    a worker is posed in this process."""
+    (the shipped T-shirt's networks, with and without a posed smoothing), in chunks of the size
+    asked for, in order, with this process's torch threads as they were; a motion of fewer than
+    two chunks a worker is posed in this process."""
     import usd_garment.methods.learned as learned
     from usd_garment.methods.learned_posing import PosingPool, can_fork
     from usd_garment.usd.read import read_smpl_motion
@@ -744,37 +744,43 @@ def test_posing_workers_stream_the_garment_of_one_process(
         (models[name] / "model.json").write_text(
             json.dumps({**config, "posed_smoothing_s": seconds})
         )
+
+    def streams(name: str, chunk: int = 3) -> tuple[list[np.ndarray], list[np.ndarray], Any]:
+        """The garment of one process and of two workers, and the method with the workers."""
+        one = list(learned.LearnedPreimageMethod(models[name]).predict_stream(
+            motion, body_model, template, chunk,
+        ))  # fmt: skip
+        method = learned.LearnedPreimageMethod(models[name])
+        method.workers = 2
+        submitted.clear()
+        return one, list(method.predict_stream(motion, body_model, template, chunk)), method
+
     threads = torch.get_num_threads()
-    torch.set_num_threads(1)  # as each worker runs: with two threads the products may round
-    try:  # otherwise (3e-8 m on 2 % of the coordinates on a 2-core Xeon, stop 85)
-        one = list(
-            learned.LearnedPreimageMethod(models["plain"]).predict_stream(
-                motion, body_model, template, 3
-            )
-        )
+    # Both at one thread, as each worker runs: at two threads this process's products may round
+    # otherwise, the rows of a matrix product split between the threads (the GRU's latent codes
+    # of the last three frames here on a 2-core EPYC, stop 89; 3e-8 m on 2 % of the posed
+    # coordinates on a 2-core Xeon, stop 85).
+    torch.set_num_threads(1)
+    try:
+        one, two, method = streams("plain")
+        assert submitted == [3, 3, 3, 2] and [len(p) for p in two] == [3, 3, 3, 2]
+        np.testing.assert_array_equal(np.concatenate(two), np.concatenate(one))
+        assert method.seconds["workers"] > 0
+        submitted.clear()
+        three = list(method.predict_stream(motion, body_model, template, 4))  # three chunks
+        assert submitted == [] and [len(p) for p in three] == [4, 4, 3]
+        assert method.seconds["workers"] == 0 and method.seconds["preimage"] > 0
+        # A posed smoothing: each chunk goes with the frames around it and comes back alone.
+        one, two, method = streams("smoothed")
+        assert submitted == [7, 10, 9, 6] and [len(p) for p in two] == [3, 3, 3, 2]  # 4 around
+        np.testing.assert_array_equal(np.concatenate(two), np.concatenate(one))
     finally:
         torch.set_num_threads(threads)
-    method = learned.LearnedPreimageMethod(models["plain"])
-    method.workers = 2
-    two = list(method.predict_stream(motion, body_model, template, 3))
-    assert submitted == [3, 3, 3, 2] and [len(p) for p in two] == [3, 3, 3, 2]
-    np.testing.assert_array_equal(np.concatenate(two), np.concatenate(one))
-    assert torch.get_num_threads() == threads and method.seconds["workers"] > 0
-    submitted.clear()
-    three = list(method.predict_stream(motion, body_model, template, 4))  # three chunks
-    assert submitted == [] and [len(p) for p in three] == [4, 4, 3]
-    assert method.seconds["workers"] == 0 and method.seconds["preimage"] > 0
-    # A posed smoothing: each chunk goes with the frames around it and comes back alone.
-    smoothed = models["smoothed"]
-    submitted.clear()
-    one = list(learned.LearnedPreimageMethod(smoothed).predict_stream(motion, body_model,
-                                                                         template, 3))  # fmt: skip
-    method = learned.LearnedPreimageMethod(smoothed)
-    method.workers = 2
-    two = list(method.predict_stream(motion, body_model, template, 3))
-    assert submitted == [7, 10, 9, 6] and [len(p) for p in two] == [3, 3, 3, 2]  # 4 frames around
-    # the same to rounding (0.3 µm here; not to the bit as without the smoothing, cause not found)
+    # At this process's own threads: the workers' garment the same to rounding, and the
+    # threads this process gave up while they ran (_threads_beside) given back.
+    one, two, method = streams("plain")
     np.testing.assert_allclose(np.concatenate(two), np.concatenate(one), atol=1e-6)
+    assert torch.get_num_threads() == threads and method.seconds["workers"] > 0
 
 
 def test_coarser_levels_of_a_pushing_method_are_dressed_not_carried(

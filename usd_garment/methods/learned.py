@@ -219,7 +219,7 @@ class LearnedMethod:
     #: Forked processes that pose the chunks and push them out through the preimages, one CPU
     #: core each, while this one decodes the next chunks and writes the last (the preimage
     #: push only; at most one for every two chunks; 1: this process; ``learned_posing``).
-    #: The same garment to the bit.
+    #: The garment of this process at one torch thread, to the bit.
     workers = 1
 
     def __init__(

@@ -7,7 +7,9 @@ Posing and the preimage push are most of ``learned+preimage``'s time and long ch
 tensor operations: on two cores two torch threads run them about 1.4 times as fast as one,
 while two processes of one thread each run twice as much. Forked workers share the caller's
 body fields and garment model without copying them, and pose and push exactly as this process
-would: the garment is the same to the bit. A platform that cannot fork has no workers.
+would at one thread: the garment is the same to the bit (at two threads a matrix product's
+rows are split between them and may round otherwise: up to 3e-7 m, stop 89). A platform that
+cannot fork has no workers.
 
 Shapes: t frames of a chunk, N garment vertices, J = 24 joints, K = 10 shape coefficients.
 Units: metres.
