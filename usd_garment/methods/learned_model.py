@@ -277,10 +277,15 @@ def _load_member(entry: dict[str, Any], tensors: dict[str, torch.Tensor], prefix
     (restored to float32: ``weight_storage.restored``) under ``prefix``."""
     parts = {}
     for name, cls in PARTS.items():
-        part = cls.from_config(entry["architecture"][name])
+        # Made on the meta device, its tensors then the stored ones (assign): no random
+        # initialization of weights about to be replaced (130 tensors, about half of a load of
+        # the five-member T-shirt). strict: a tensor missing from the file is an error, so no
+        # meta tensor is left.
+        with torch.device("meta"):
+            part = cls.from_config(entry["architecture"][name])
         head = f"{prefix}{name}."
         state = {k[len(head) :]: v for k, v in tensors.items() if k.startswith(head)}
-        part.load_state_dict(state)
+        part.load_state_dict(state, assign=True)
         parts[name] = part.eval()
     info = {k: v for k, v in entry.items() if k != "architecture"}
     return Member(**parts, info=info)  # type: ignore[arg-type]
