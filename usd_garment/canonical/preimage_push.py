@@ -34,6 +34,7 @@ import torch
 from usd_garment.body.lbs import solve3
 from usd_garment.body.model import BodyModel
 from usd_garment.canonical.push_out import sdf_and_normal
+from usd_garment.canonical.shape_gap import ShapeGap
 from usd_garment.fields.body_fields import BodyFields
 
 #: Margin (m) around each part's box in its bone's rest frame.
@@ -129,6 +130,7 @@ def preimage_push(
     betas: torch.Tensor,
     boxes: PartBoxes,
     epsilon: float,
+    gap: ShapeGap | None = None,
 ) -> torch.Tensor:
     """Posed garments ``(T, N, 3)`` with every vertex that has another preimage less than
     ``epsilon`` outside the canonical body moved to ``epsilon`` outside, out of its deepest such
@@ -145,6 +147,10 @@ def preimage_push(
         betas: ``(K,)`` the body shape.
         boxes: ``PartBoxes.of(body, betas)``.
         epsilon: distance (m) outside the body the moved vertices end at (outside a crease).
+        gap: on a shaped body, how far the shape fields fall short near it (``shape_gap``):
+            a preimage's distance is its canonical SDF less the shortfall at it, but for a
+            vertex already in a crease (where a larger move out of one part is a move into
+            the other); None: the canonical SDF alone (the template shape has no shortfall).
     """
     out = points.clone()
     visit = torch.ones(points.shape[:2], dtype=torch.bool)  # (T, N): the vertices this pass sees
@@ -154,7 +160,9 @@ def preimage_push(
         for k in range(PASSES):
             mine = own if k == 0 else None  # the own preimage skins to the vertex until it moves
             frame, vertex, guess = _candidates(out, mine, transforms, boxes, visit)
-            visit = _push(out, mine, skin, frame, vertex, guess, fields, betas, epsilon, k, state)
+            visit = _push(
+                out, mine, skin, frame, vertex, guess, fields, betas, epsilon, k, state, gap
+            )
             if not bool(visit.any()):
                 break
     return out
@@ -260,14 +268,16 @@ def _push(
     epsilon: float,
     k: int,
     crease: _Crease,
+    gap: ShapeGap | None = None,
 ) -> torch.Tensor:
     """Pass ``k`` of :func:`preimage_push` on ``out`` ``(T, N, 3)``, in place, from the rigid
     guesses ``guess`` ``(M, 3)`` of the vertices ``(frame, vertex)`` ``(M,)``: each vertex
     with a preimage less than ``epsilon`` outside the canonical body (``epsilon / 2**k`` for a
     vertex in a crease) moves out of the deepest one, to that distance outside. A move against
     the vertex's move before puts it in the crease (``crease``, updated); a vertex whose deepest
-    preimage already lies that far outside does not move. Returns ``(T, N)`` bool, the vertices
-    it moved."""
+    preimage already lies that far outside does not move. ``gap``: the shape fields' shortfall,
+    less from each preimage's distance outside a crease (:func:`preimage_push`). Returns
+    ``(T, N)`` bool, the vertices it moved."""
     moved = torch.zeros(out.shape[:2], dtype=torch.bool)
     if frame.numel() == 0:
         return moved
@@ -275,12 +285,16 @@ def _push(
     rows = frame * out.shape[1] + vertex
     target = out.view(-1, 3).index_select(0, rows)
     mine = None if own is None else own.reshape(-1, 3).index_select(0, rows)
-    x, weights, kept = _refine(guess, target, skin, frame, mine, fields, betas, epsilon)
+    reach = epsilon if gap is None else epsilon + gap.largest  # the guesses worth refining
+    x, weights, kept = _refine(guess, target, skin, frame, mine, fields, betas, reach)
     if kept.numel() == 0:
         return moved
     distance, normal = sdf_and_normal(fields.sdf, x)
+    in_crease = crease.creased[frame[kept], vertex[kept]]
+    if gap is not None:  # the distance outside the shaped body, to first order
+        distance = distance - torch.where(in_crease, 0.0, gap.at(x))
     half = epsilon / 2**k
-    limit = torch.where(crease.creased[frame[kept], vertex[kept]], half, epsilon)
+    limit = torch.where(in_crease, half, epsilon)
     hit = torch.nonzero(distance < limit)[:, 0]
     if hit.numel() == 0:
         return moved

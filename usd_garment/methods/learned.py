@@ -27,6 +27,7 @@ import torch
 from usd_garment.body.model import BodyModel
 from usd_garment.canonical.preimage_push import PartBoxes, preimage_push
 from usd_garment.canonical.push_out import push_out_canonical
+from usd_garment.canonical.shape_gap import ShapeGap, shape_gap
 from usd_garment.eval.body_distance import BodySurface, body_pool
 from usd_garment.eval.push_out import PUSH_OUT_EPS, PUSH_OUT_PASSES, push_out
 from usd_garment.fields.body_fields import (
@@ -372,6 +373,7 @@ class LearnedMethod:
         surface = BodySurface(body.faces.numpy(), body.num_vertices) if self.push_out else None
         betas = torch.as_tensor(motion.betas, dtype=torch.float32)
         boxes = PartBoxes.of(body, betas) if self.preimage else None
+        gap = shape_gap(body, self._fields, betas) if self.preimage else None
         pose = torch.as_tensor(motion.pose, dtype=torch.float32)
         trans = torch.as_tensor(motion.trans, dtype=torch.float32)
         t_frames = motion.num_frames
@@ -385,7 +387,7 @@ class LearnedMethod:
         z = predict_latents(model, without_jumps(motion, jumps, body), restarts, restarts)
         smoothing = Smoothing.of(self.posed_smoothing(model), motion.fps, restarts, jumps)
         lap("regressor")
-        posing = self._posing_pool(garment_model, betas, boxes, -(-t_frames // chunk))
+        posing = self._posing_pool(garment_model, betas, boxes, gap, -(-t_frames // chunk))
         pending: deque[Future[np.ndarray]] = deque()  # the chunks the workers have, in order
 
         def collect() -> np.ndarray:
@@ -435,7 +437,7 @@ class LearnedMethod:
                     if boxes is not None:  # the whole chunk at once: fewer, larger steps
                         vertices = preimage_push(
                             vertices, unposed, art.transforms[core], self._fields, betas, boxes,
-                            PUSH_OUT_EPS,
+                            PUSH_OUT_EPS, gap,
                         )  # fmt: skip
                         lap("preimage")
                     points = vertices.numpy()
@@ -458,6 +460,7 @@ class LearnedMethod:
         garment_model: GarmentModel,
         betas: torch.Tensor,
         boxes: PartBoxes | None,
+        gap: ShapeGap | None,
         chunks: int,
     ) -> PosingPool | None:
         """Worker processes that pose and push the ``chunks`` chunks of a motion: at most
@@ -468,7 +471,7 @@ class LearnedMethod:
         workers = min(self.workers, chunks // 2)
         if boxes is None or workers <= 1 or not can_fork():
             return None
-        return PosingPool(workers, garment_model, betas, boxes, PUSH_OUT_EPS)
+        return PosingPool(workers, garment_model, betas, boxes, PUSH_OUT_EPS, gap)
 
 
 @contextmanager
@@ -571,8 +574,9 @@ class LearnedPreimageMethod(LearnedMethod):
     """The learned garment pushed out of the body without a search structure per frame: its
     decoded canonical garment ε out of the canonical body (``learned+canonical``), then each
     posed vertex ε out of the parts that posing carries it into, found through the body's
-    skinning preimages (:func:`preimage_push`). Not exact: a preimage the fixed point misses,
-    or a vertex between two parts, can stay inside; the winding-number push-out
+    skinning preimages (:func:`preimage_push`; on a shaped body each preimage's distance less
+    the shape fields' shortfall there, :func:`shape_gap`). Not exact: a preimage the fixed
+    point misses, or a vertex between two parts, can stay inside; the winding-number push-out
     (``learned+postprocess``) is."""
 
     name = "learned+preimage"

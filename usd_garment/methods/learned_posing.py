@@ -29,6 +29,7 @@ import torch
 from usd_garment.body.lbs import unskin_blended
 from usd_garment.canonical.preimage_push import PartBoxes, preimage_push
 from usd_garment.canonical.push_out import LIPSCHITZ, push_out_canonical
+from usd_garment.canonical.shape_gap import ShapeGap
 from usd_garment.fields.body_fields import FieldTangent
 from usd_garment.garment.model import Articulation, GarmentModel
 from usd_garment.motion.cuts import smooth_runs
@@ -217,12 +218,14 @@ def can_fork() -> bool:
 @dataclass(frozen=True)
 class _Work:
     """What every chunk of one motion shares: the garment model (with the body's fields), the
-    body shape ``(K,)``, the body parts' boxes and the push's distance ε (m)."""
+    body shape ``(K,)``, the body parts' boxes, the push's distance ε (m) and the shape fields'
+    shortfall on that body (``shape_gap``; None for the template shape)."""
 
     garment_model: GarmentModel
     betas: torch.Tensor
     boxes: PartBoxes
     epsilon: float
+    gap: ShapeGap | None
 
 
 #: A worker's work, set when it starts (:func:`_start`).
@@ -268,7 +271,7 @@ def _pose_and_push(
         del posed  # freed before the push (the blended transforms: ~55 MB a chunk)
         pushed = preimage_push(
             vertices, unposed, art.transforms[core], fields, work.betas, work.boxes,
-            work.epsilon,
+            work.epsilon, work.gap,
         )  # fmt: skip
     return pushed.numpy()
 
@@ -296,11 +299,12 @@ class PosingPool:
         betas: torch.Tensor,
         boxes: PartBoxes,
         epsilon: float,
+        gap: ShapeGap | None = None,
     ) -> None:
         self.workers = workers
         self._executor = ProcessPoolExecutor(
             workers, mp_context=multiprocessing.get_context("fork"), initializer=_start,
-            initargs=(_Work(garment_model, betas, boxes, epsilon),),
+            initargs=(_Work(garment_model, betas, boxes, epsilon, gap),),
         )  # fmt: skip
 
     def submit(
