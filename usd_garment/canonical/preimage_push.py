@@ -148,9 +148,10 @@ def preimage_push(
         boxes: ``PartBoxes.of(body, betas)``.
         epsilon: distance (m) outside the body the moved vertices end at (outside a crease).
         gap: on a shaped body, how far the shape fields fall short near it (``shape_gap``):
-            a preimage's distance is its canonical SDF less the shortfall at it, but for a
-            vertex already in a crease (where a larger move out of one part is a move into
-            the other); None: the canonical SDF alone (the template shape has no shortfall).
+            a preimage's distance is its canonical SDF less the shortfall at it, for a
+            vertex in a crease too (stop 90: stop 89 left those with the SDF alone, and at
+            β₁ = −3 most of what it left inside elsewhere was in a crease); None: the
+            canonical SDF alone (the template shape has no shortfall).
     """
     out = points.clone()
     visit = torch.ones(points.shape[:2], dtype=torch.bool)  # (T, N): the vertices this pass sees
@@ -276,7 +277,7 @@ def _push(
     vertex in a crease) moves out of the deepest one, to that distance outside. A move against
     the vertex's move before puts it in the crease (``crease``, updated); a vertex whose deepest
     preimage already lies that far outside does not move. ``gap``: the shape fields' shortfall,
-    less from each preimage's distance outside a crease (:func:`preimage_push`). Returns
+    less from each preimage's distance (:func:`preimage_push`). Returns
     ``(T, N)`` bool, the vertices it moved."""
     moved = torch.zeros(out.shape[:2], dtype=torch.bool)
     if frame.numel() == 0:
@@ -292,7 +293,7 @@ def _push(
     distance, normal = sdf_and_normal(fields.sdf, x)
     in_crease = crease.creased[frame[kept], vertex[kept]]
     if gap is not None:  # the distance outside the shaped body, to first order
-        distance = distance - torch.where(in_crease, 0.0, gap.at(x))
+        distance = distance - gap.at(x)
     half = epsilon / 2**k
     limit = torch.where(in_crease, half, epsilon)
     hit = torch.nonzero(distance < limit)[:, 0]
