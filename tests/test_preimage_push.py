@@ -133,17 +133,20 @@ class _ShapedChest:
     down, where the shape fields fall shortest (``shortfall``, m), its own preimage ``(1, 1, 3)``
     30 cm away, and what pushing it needs."""
 
-    body: BodyModel
     fields: BodyFields
     betas: torch.Tensor
     gap: ShapeGap
-    shortfall: float
     chest: int
     points: torch.Tensor
     own: torch.Tensor
     art: Articulation
     posed: np.ndarray
     surface: BodySurface
+
+    @property
+    def shortfall(self) -> float:
+        """The shape fields' shortfall (m) at the chest vertex."""
+        return float(self.gap.gap[self.chest])
 
     def distance(self, points: torch.Tensor) -> float:
         """The winding-number signed distance (m) of ``points`` ``(1, 1, 3)`` to the posed
@@ -166,10 +169,7 @@ def _shaped_chest(body: BodyModel) -> _ShapedChest:
     own = (points - g[:3, 3]) @ g[:3, :3]
     own[..., 0] += 0.3  # its own preimage 30 cm away
     surface = BodySurface(body.faces.numpy(), body.num_vertices)
-    shortfall = float(gap.gap[chest])
-    return _ShapedChest(
-        body, fields, betas, gap, shortfall, chest, points, own, art, posed, surface
-    )
+    return _ShapedChest(fields, betas, gap, chest, points, own, art, posed, surface)
 
 
 def test_a_point_inside_a_shaped_chest_is_pushed_out_of_the_shaped_body(

@@ -291,11 +291,10 @@ def _push(
     if kept.numel() == 0:
         return moved
     distance, normal = sdf_and_normal(fields.sdf, x)
-    in_crease = crease.creased[frame[kept], vertex[kept]]
     if gap is not None:  # the distance outside the shaped body, to first order
         distance = distance - gap.at(x)
     half = epsilon / 2**k
-    limit = torch.where(in_crease, half, epsilon)
+    limit = torch.where(crease.creased[frame[kept], vertex[kept]], half, epsilon)
     hit = torch.nonzero(distance < limit)[:, 0]
     if hit.numel() == 0:
         return moved
