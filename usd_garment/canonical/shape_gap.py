@@ -22,15 +22,18 @@ Shapes: V body vertices, M points, K = 10 shape coefficients. Units: metres.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
-import trimesh
 from scipy.spatial import cKDTree
 
 from usd_garment.body.model import BodyModel
 from usd_garment.fields.body_fields import BodyFields
 from usd_garment.generative.losses import COLLISION_EPSILON
+
+if TYPE_CHECKING:
+    import trimesh
 
 #: How far outside the template body (m) the shortfall is measured: the pushes' distance ε,
 #: where the vertices they move end.
@@ -65,6 +68,8 @@ def shape_gap(body: BodyModel, fields: BodyFields, betas: torch.Tensor) -> Shape
     (0 where it ends as far or farther); None for the template shape."""
     if not bool(betas.any()):
         return None
+    import trimesh  # here: a template-shape dress (every BVH import) need not load it (~0.5 s)
+
     template = _mesh(body, torch.zeros_like(betas))
     start = template.vertices + OFFSET * template.vertex_normals
     points = torch.as_tensor(start, dtype=torch.float32)
@@ -80,6 +85,8 @@ def shape_gap(body: BodyModel, fields: BodyFields, betas: torch.Tensor) -> Shape
 
 def _mesh(body: BodyModel, betas: torch.Tensor) -> trimesh.Trimesh:
     """The rest body of shape ``betas`` ``(K,)``."""
+    import trimesh
+
     with torch.no_grad():
         vertices, _ = body.shaped(betas[None].float())
     return trimesh.Trimesh(vertices[0].numpy(), body.faces.numpy(), process=False)
