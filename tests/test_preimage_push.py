@@ -417,8 +417,10 @@ def test_learned_preimage_leaves_fewer_vertices_inside(
             betas, torch.as_tensor(motion.pose).float(), torch.as_tensor(motion.trans).float()
         ).vertices.numpy()
     surface = BodySurface(body.faces.numpy(), body.num_vertices)
-    before = signed_distance(learned, posed, surface).elsewhere.mean()
-    after = signed_distance(pushed, posed, surface).elsewhere.mean()
+    # On every other frame: each winding-number pass over the 120 frames took 12 s of the
+    # test's 31, and the shares on half of them are within 2e-5 of all frames' (stop 91).
+    before = signed_distance(learned[::2], posed[::2], surface).elsewhere.mean()
+    after = signed_distance(pushed[::2], posed[::2], surface).elsewhere.mean()
     assert before > 1e-3 and after < before * share, (before, after)
     moved = np.linalg.norm(pushed - unpushed, axis=-1)
     assert moved.mean() < 2e-4 and moved.max() < 5e-2, (moved.mean(), moved.max())
