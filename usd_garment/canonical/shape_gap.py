@@ -68,15 +68,13 @@ def shape_gap(body: BodyModel, fields: BodyFields, betas: torch.Tensor) -> Shape
     (0 where it ends as far or farther); None for the template shape."""
     if not bool(betas.any()):
         return None
-    import trimesh  # here: a template-shape dress (every BVH import) need not load it (~0.5 s)
-
     template = _mesh(body, torch.zeros_like(betas))
     start = template.vertices + OFFSET * template.vertex_normals
     points = torch.as_tensor(start, dtype=torch.float32)
     with torch.no_grad():
         carried = (points + fields.shape_offsets(points, betas.float())).numpy()
     shaped = _mesh(body, betas)
-    near, distance, face = trimesh.proximity.closest_point(shaped, carried)
+    near, distance, face = shaped.nearest.on_surface(carried)
     outside = np.einsum("nc,nc->n", carried - near, shaped.face_normals[face]) >= 0
     distance = np.where(outside, distance, -distance)  # signed by the nearest face's side
     gap = torch.as_tensor(np.maximum(OFFSET - distance, 0.0), dtype=torch.float32)
@@ -85,7 +83,7 @@ def shape_gap(body: BodyModel, fields: BodyFields, betas: torch.Tensor) -> Shape
 
 def _mesh(body: BodyModel, betas: torch.Tensor) -> trimesh.Trimesh:
     """The rest body of shape ``betas`` ``(K,)``."""
-    import trimesh
+    import trimesh  # here: a template-shape dress (every BVH import) need not load it (~0.5 s)
 
     with torch.no_grad():
         vertices, _ = body.shaped(betas[None].float())
