@@ -93,22 +93,15 @@ def test_a_point_carried_into_the_chest_is_pushed_out(
 
     # The crease rule: in pass 1, a move against the vertex's move before (here: into the
     # chest) puts it in a crease and ends half as far out (1 mm); with no move before, 2 mm.
-    skin = art.transforms[..., :3, :].reshape(-1, 12)
-
     def pass_1(
         start: torch.Tensor, mine: torch.Tensor | None, move_before: torch.Tensor
     ) -> tuple[torch.Tensor, preimage._Crease, torch.Tensor]:
-        """Pass 1 of the push on one point ``start`` ``(1, 1, 3)``: the point after it, the
-        crease state and whether it moved."""
+        """Pass 1 of the push on one point ``start`` ``(1, 1, 3)`` moved along ``move_before``
+        before: the point after it, the crease state and whether it moved."""
         crease = preimage._Crease(
             move_before.expand(1, 1, 3).clone(), torch.zeros(1, 1, dtype=torch.bool)
         )
-        out = start.clone()
-        visit = torch.ones(1, 1, dtype=torch.bool)
-        frame, vertex, guess = preimage._candidates(out, mine, art.transforms, boxes, visit)
-        moved = preimage._push(
-            out, mine, skin, frame, vertex, guess, fields, betas, PUSH_OUT_EPS, 1, crease
-        )
+        out, moved = _pass_1(start, mine, art.transforms, boxes, fields, betas, crease)
         return out, crease, moved
 
     ends = []
@@ -125,6 +118,29 @@ def test_a_point_carried_into_the_chest_is_pushed_out(
     assert bool(moved[0, 0])
     end = signed_distance(out.numpy(), posed[None], surface).distance[0, 0]
     assert 1e-3 < end < 4e-3, end
+
+
+def _pass_1(
+    points: torch.Tensor,
+    own: torch.Tensor | None,
+    transforms: torch.Tensor,
+    boxes: PartBoxes,
+    fields: BodyFields,
+    betas: torch.Tensor,
+    crease: preimage._Crease,
+    gap: ShapeGap | None = None,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Pass 1 of :func:`preimage_push` on ``points`` ``(T, N, 3)`` posed by ``transforms``
+    ``(T, J, 4, 4)``, every vertex visited, from the state ``crease`` (updated): the points
+    after it and ``(T, N)`` whether each moved."""
+    out = points.clone()
+    visit = torch.ones(points.shape[:2], dtype=torch.bool)
+    frame, vertex, guess = preimage._candidates(out, own, transforms, boxes, visit)
+    skin = transforms[..., :3, :].reshape(-1, 12)
+    moved = preimage._push(
+        out, own, skin, frame, vertex, guess, fields, betas, PUSH_OUT_EPS, 1, crease, gap
+    )
+    return out, moved
 
 
 @dataclasses.dataclass(frozen=True)
@@ -221,15 +237,12 @@ def test_a_point_in_a_crease_of_a_shaped_chest_is_pushed_out_of_the_shaped_body(
     body = _default_body(body_model, synthetic_body)
     c = _shaped_chest(body)
     boxes = PartBoxes.of(body, c.betas)
-    skin = c.art.transforms[..., :3, :].reshape(-1, 12)
-    visit = torch.ones(c.points.shape[:2], dtype=torch.bool)
     ends = []
     for gap in (c.gap, None):
-        out = c.points.clone()
-        crease = preimage._Crease(torch.zeros_like(out), visit.clone())
-        frame, vertex, guess = preimage._candidates(out, None, c.art.transforms, boxes, visit)
-        moved = preimage._push(
-            out, None, skin, frame, vertex, guess, c.fields, c.betas, PUSH_OUT_EPS, 1, crease, gap
+        creased = torch.ones(c.points.shape[:2], dtype=torch.bool)
+        crease = preimage._Crease(torch.zeros_like(c.points), creased)
+        out, moved = _pass_1(
+            c.points, None, c.art.transforms, boxes, c.fields, c.betas, crease, gap
         )
         assert bool(moved.all())
         ends.append(c.distance(out))
