@@ -12,7 +12,8 @@ from pathlib import Path
 ROOT = Path(__file__).parent.parent
 
 # Logs its arguments, one JSON list a line; makes what later lines of a script read: the folder
-# of a training's --out (with model.json for `train all`), the file of a projection's, a
+# of a training's --out (with model.json for `train all`, and for `train combine` one that lists
+# a member for each run folder joined), the file of a projection's, a
 # motion's, a simulation's or an import's -o.
 STAND_IN = """\
 import json, pathlib, sys
@@ -23,6 +24,10 @@ if args[0] == "train":
     pathlib.Path(args[args.index("--out") + 1]).mkdir(parents=True, exist_ok=True)
 if args[:2] == ["train", "all"]:
     (pathlib.Path(args[args.index("--out") + 1]) / "model.json").touch()
+if args[:2] == ["train", "combine"]:  # a member for each run folder joined
+    joined = [a for a in args[2:args.index("--out")] if not a.startswith("-")]
+    model = pathlib.Path(args[args.index("--out") + 1]) / "model.json"
+    model.write_text(json.dumps({{"members": [{{}} for _ in joined]}}))
 if args[0] in ("project", "motion", "simulate", "import-bvh"):
     pathlib.Path(args[args.index("-o") + 1]).touch()
 """

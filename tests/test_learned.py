@@ -543,6 +543,50 @@ def test_the_recipe_script_trains_only_the_members_named(tmp_path: Path) -> None
         shutil.rmtree(tmp_path / "wrong")
 
 
+@pytest.mark.parametrize("garment", ["tshirt", "dress"])
+def test_the_table1_script_trains_each_ablation_with_the_whole_recipe(
+    garment: str, tmp_path: Path
+) -> None:
+    """``examples/train/table1.sh GARMENT OUT``: for each ablation, every command of the
+    recipe (``recipe.sh``'s, and for the T-shirt ``capture_members.sh``'s too, on the recipe's
+    members) with that ablation, then ``TRAIN_ARGS``, and in that ablation's run folders; the
+    T-shirt's five members joined as the shipped model is; then one bench of the shipped
+    model, each ablation, ``lbs`` and ``lbs+postprocess`` on the test split and the
+    AMASS-style walk."""
+    env = {"TRAIN_ARGS": "--epochs vae=1"}  # a quick try's, after the ablation
+    calls = script_calls("table1.sh", garment, "T1", "D", "C", tmp_path=tmp_path, env=env)
+    ablations = ("no-collision", "no-self-supervision")
+    trains = [c for c in calls if c[:2] in (["train", "all"], ["train", "regressor"])]
+    members = 5 if garment == "tshirt" else 3
+    per_member = 4 if garment == "tshirt" else 3  # train all, then the regressor's steps
+    assert len(trains) == 2 * (3 * per_member + (1 + 6 if garment == "tshirt" else 0))
+    for ablation in ablations:
+        mine = [c for c in trains if c[c.index("--ablation") + 1] == ablation]
+        assert len(mine) == len(trains) // 2
+        assert all(c[c.index("--out") + 1].startswith(f"T1/runs/{ablation}/") for c in mine)
+        assert all(c[c.index("--epochs") + 1] == "vae=1" for c in mine)
+    combines = [c for c in calls if c[:2] == ["train", "combine"]]
+    finals = [c for c in combines if c[c.index("--out") + 1] in
+              [f"T1/{garment}_{a}" for a in ablations]]  # fmt: skip
+    assert len(finals) == 2 and all(len(c[2 : c.index("--out")]) == members for c in finals)
+    if garment == "tshirt":  # the recipe's three kept as members, beside two capture members
+        assert all(c[c.index("--weights") + 1] == "int8" for c in finals)
+        kept = [c[2] for c in calls if c[:2] == ["train", "member"]]
+        assert kept == ["T1/tshirt_no-collision_recipe"] * 3 + [
+            "T1/tshirt_no-self-supervision_recipe"] * 3  # fmt: skip
+    (bench,) = [c for c in calls if c[0] == "bench"]
+    assert bench[1] == "T1/heldout/amass_walk120.usdc"
+    value = dict(zip(bench[2::2], bench[3::2], strict=False))
+    assert value["--manifest"] == f"D/dataset_{garment}_v4" and value["--split"] == "test"
+    assert [bench[i + 1] for i, a in enumerate(bench) if a == "--method"] == [
+        "learned", "lbs", "lbs+postprocess"]  # fmt: skip
+    assert [bench[i + 1] for i, a in enumerate(bench) if a == "--model"] == [
+        f"{a}=T1/{garment}_{a}" for a in ablations]  # fmt: skip
+    (tmp_path / "wrong").mkdir()
+    with pytest.raises(subprocess.CalledProcessError):
+        script_calls("table1.sh", "skirt", "T1", tmp_path=tmp_path / "wrong")
+
+
 def test_a_failed_first_step_at_once_stops_the_other_members(tmp_path: Path) -> None:
     """``AT_ONCE=1 recipe.sh``: when one member's ``train all`` fails, the two still training
     are stopped and the recipe exits with an error, rather than waiting on them."""

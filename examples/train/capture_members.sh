@@ -19,7 +19,9 @@
 # skipped, so an interrupted run goes on where it stopped. Stop 87 on 2 cores: base 2,131 s (the
 # VAE slowed by a projection beside it for its first epochs), the posed planes of the 101
 # sequences about 11 minutes (made once, in seed 0's J1), each seed's three regressor steps 5-6
-# minutes. DEVICE=cuda trains on a GPU.
+# minutes. DEVICE=cuda trains on a GPU; TRAIN_ARGS is added to every train command, as in
+# recipe.sh (e.g. TRAIN_ARGS="--ablation no-collision": examples/train/table1.sh); VERSION names
+# the joined model (10 by default).
 set -euo pipefail
 # One compound command, read whole before it runs (see data.sh).
 {
@@ -30,6 +32,7 @@ DATA=${3:-scratch/rest}
 CAPTURES=${4:-scratch/cap35}
 RUNS=${RUNS:-scratch/runs_cap}
 DEVICE=${DEVICE:-cpu}
+read -r -a EXTRA <<<"${TRAIN_ARGS:-}"
 HERE=$(dirname "$0")
 SET=$CAPTURES/canonical_tshirt_v4c.npz
 PLANES=$CAPTURES/planes_canonical_tshirt_v4c.npz
@@ -37,7 +40,7 @@ mkdir -p "$RUNS"
 
 if [ ! -f "$RUNS/cap_base/model.json" ]; then
     usd-garment train all --data "$DATA/canonical_tshirt_v4c.npz" --out "$RUNS/cap_base" \
-        --device "$DEVICE" --config "$HERE/tshirt_member0.json" --resume
+        --device "$DEVICE" --config "$HERE/tshirt_member0.json" --resume "${EXTRA[@]}"
 fi
 for seed in 0 1; do
     from=$RUNS/cap_base
@@ -50,7 +53,8 @@ for seed in 0 1; do
             rm -f "$run/checkpoints/regressor.pt" "$run/.done"
             args=(--config "$HERE/$settings.json" --seed "$seed")
             [ -n "$planes" ] && args+=(--init-from "$from" --planes "$PLANES")
-            usd-garment train regressor --data "$SET" --out "$run" --device "$DEVICE" "${args[@]}"
+            usd-garment train regressor --data "$SET" --out "$run" --device "$DEVICE" "${args[@]}" \
+                "${EXTRA[@]}"
             touch "$run/.done"
         fi
         from=$run
