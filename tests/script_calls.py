@@ -20,7 +20,7 @@ import json, pathlib, sys
 args = sys.argv[1:]
 with open({log!r}, "a") as f:
     f.write(json.dumps(args) + "\\n")
-if args[0] == "train":
+if args[0] == "train" and "--out" in args:
     pathlib.Path(args[args.index("--out") + 1]).mkdir(parents=True, exist_ok=True)
 if args[:2] == ["train", "all"]:
     (pathlib.Path(args[args.index("--out") + 1]) / "model.json").touch()

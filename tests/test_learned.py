@@ -550,9 +550,9 @@ def test_the_table1_script_trains_each_ablation_with_the_whole_recipe(
     """``examples/train/table1.sh GARMENT OUT``: for each ablation, every command of the
     recipe (``recipe.sh``'s, and for the T-shirt ``capture_members.sh``'s too, on the recipe's
     members) with that ablation, then ``TRAIN_ARGS``, and in that ablation's run folders; the
-    T-shirt's five members joined as the shipped model is; then one bench of the shipped
-    model, each ablation, ``lbs`` and ``lbs+postprocess`` on the test split and the
-    AMASS-style walk."""
+    T-shirt's five members joined as the shipped model is; Fig. 4 of member 0's VAEs; then one
+    bench of the shipped model, each ablation, ``lbs`` and ``lbs+postprocess`` on the test
+    split and the AMASS-style walk."""
     env = {"TRAIN_ARGS": "--epochs vae=1"}  # a quick try's, after the ablation
     calls = script_calls("table1.sh", garment, "T1", "D", "C", tmp_path=tmp_path, env=env)
     ablations = ("no-collision", "no-self-supervision")
@@ -574,6 +574,10 @@ def test_the_table1_script_trains_each_ablation_with_the_whole_recipe(
         kept = [c[2] for c in calls if c[:2] == ["train", "member"]]
         assert kept == ["T1/tshirt_no-collision_recipe"] * 3 + [
             "T1/tshirt_no-self-supervision_recipe"] * 3  # fmt: skip
+    firsts = [c[c.index("--out") + 1] for c in trains if c[:2] == ["train", "all"]]
+    (compare,) = [c for c in calls if c[:2] == ["train", "compare"]]  # Fig. 4: member 0's VAEs
+    assert compare[2:4] == [f for f in firsts if f.endswith("_m0") and "cap_" not in f]
+    assert compare[compare.index("-o") + 1] == "T1/fig4.png"
     (bench,) = [c for c in calls if c[0] == "bench"]
     assert bench[1] == "T1/heldout/amass_walk120.usdc"
     value = dict(zip(bench[2::2], bench[3::2], strict=False))

@@ -16,8 +16,9 @@
 # recipe again on DATA too (the shipped model was trained on data made on another machine: stop
 # 91 found 28 of v4's 33 sequences the same). DEVICE and AT_ONCE as in recipe.sh (AT_ONCE=1 on a
 # 2-core CPU); TRAIN_ARGS is added to every train command after the ablation (e.g. "--epochs
-# pose=1 --epochs vae=1 --epochs regressor=1" for a quick try). On 2 cores about 2.5 h a recipe (stop 61), and for the T-shirt about 1 h more of
-# capture members; one GPU takes a fraction of that.
+# pose=1 --epochs vae=1 --epochs regressor=1" for a quick try). On 2 cores about 2.5 h a recipe
+# (stop 61), and for the T-shirt about 1 h more of capture members.
+# OUT/fig4.png: the paper's Fig. 4, member 0's VAE of each (collisions on held-out data by epoch).
 # The bench (OUT/bench_table1: report.json, chart.png, the table printed) runs on DATA's test
 # split and the AMASS-style walk (examples/heldout_walk.sh, made in OUT/heldout where it is not
 # there), the networks alone at the high level of detail, two workers; afterwards
@@ -32,14 +33,15 @@ GARMENT=${1:?$usage}
 OUT=${2:?$usage}
 DATA=${3:-scratch/rest}
 CAPTURES=${4:-scratch/cap35}
-case $GARMENT in
-    tshirt | dress) ;;
+case $GARMENT in  # FIRST: recipe.sh's first step (train all: pose code, VAE, first regressor)
+    tshirt) FIRST=T30 ;;
+    dress) FIRST=D30 ;;
     *) echo "table1.sh: the garment is tshirt or dress, not '$GARMENT'" >&2; exit 2 ;;
 esac
 read -r -a ABLATION_LIST <<<"${ABLATIONS:-no-collision no-self-supervision}"
 EXTRA=${TRAIN_ARGS:-}
 HERE=$(dirname "$0")
-models=()
+models=() firsts=()
 for ablation in "${ABLATION_LIST[@]}"; do
     runs=$OUT/runs/$ablation
     model=$OUT/${GARMENT}_$ablation
@@ -52,7 +54,9 @@ for ablation in "${ABLATION_LIST[@]}"; do
             bash "$HERE/capture_members.sh" "$recipe" "$model" "$DATA" "$CAPTURES"
     fi
     models+=(--model "$ablation=$model")
+    firsts+=("$runs/${GARMENT}_${FIRST}_m0")
 done
+usd-garment train compare "${firsts[@]}" -o "$OUT/fig4.png"
 
 WALK=$OUT/heldout/amass_walk120.usdc
 [ -f "$WALK" ] || bash "$HERE/../heldout_walk.sh" "$OUT/heldout"
