@@ -59,8 +59,10 @@ def plot_collisions(runs: dict[str, list[dict[str, Any]]], path: str | Path) -> 
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), sharey=False)
     for label, rows in runs.items():
         epochs = [r["epoch"] for r in rows]
-        axes[0].plot(epochs, [r.get("val_rec_inside_pct") for r in rows], label=label)
-        axes[1].plot(epochs, [r.get("val_rand_inside_pct") for r in rows], label=label)
+        # a dot at each epoch: a run of one epoch (a quick try) has no line to draw
+        style = {"label": label, "marker": "o", "markersize": 3}
+        axes[0].plot(epochs, [r.get("val_rec_inside_pct") for r in rows], **style)
+        axes[1].plot(epochs, [r.get("val_rand_inside_pct") for r in rows], **style)
     axes[0].set_title("held-out garments, reconstructed")
     axes[1].set_title("random latents z ~ N(0, I), decoded")
     for ax in axes:
