@@ -16,8 +16,10 @@
 # recipe again on DATA too (the shipped model was trained on data made on another machine: stop
 # 91 found 28 of v4's 33 sequences the same). DEVICE and AT_ONCE as in recipe.sh (AT_ONCE=1 on a
 # 2-core CPU); TRAIN_ARGS is added to every train command after the ablation (e.g. "--epochs
-# pose=1 --epochs vae=1 --epochs regressor=1" for a quick try). On 2 cores about 2.5 h a recipe
-# (stop 61), and for the T-shirt about 1 h more of capture members.
+# pose=1 --epochs vae=1 --epochs regressor=1" for a quick try). On 2 cores with AT_ONCE=1 about
+# 2 h an ablation's recipe (50 VAE epochs of 90 s with three at once, stop 56; the T-shirt's
+# nine regressor steps of about 3 minutes, stop 61), and for the T-shirt about 1 h more (its
+# capture members, stop 87).
 # OUT/fig4.png: the paper's Fig. 4, member 0's VAE of each (collisions on held-out data by epoch).
 # The bench (OUT/bench_table1: report.json, chart.png, the table printed) runs on DATA's test
 # split and the AMASS-style walk (examples/heldout_walk.sh, made in OUT/heldout where it is not
