@@ -49,11 +49,11 @@ for ablation in "${ABLATION_LIST[@]}"; do
     model=$OUT/${GARMENT}_$ablation
     recipe=$model
     [ "$GARMENT" = tshirt ] && recipe=$OUT/tshirt_${ablation}_recipe
-    RUNS=$runs VERSION=table1-$ablation TRAIN_ARGS="--ablation $ablation $EXTRA" \
-        bash "$HERE/recipe.sh" "$GARMENT" "$recipe" "$DATA"
+    # read by recipe.sh and capture_members.sh alike
+    export RUNS=$runs VERSION=table1-$ablation TRAIN_ARGS="--ablation $ablation $EXTRA"
+    bash "$HERE/recipe.sh" "$GARMENT" "$recipe" "$DATA"
     if [ "$GARMENT" = tshirt ]; then
-        RUNS=$runs VERSION=table1-$ablation TRAIN_ARGS="--ablation $ablation $EXTRA" \
-            bash "$HERE/capture_members.sh" "$recipe" "$model" "$DATA" "$CAPTURES"
+        bash "$HERE/capture_members.sh" "$recipe" "$model" "$DATA" "$CAPTURES"
     fi
     models+=(--model "$ablation=$model")
     firsts+=("$runs/${GARMENT}_${FIRST}_m0")
