@@ -18,6 +18,7 @@ from usd_garment.body import BodyModel, load_body_model
 from usd_garment.body.joints import NUM_JOINTS
 from usd_garment.cli.main import main
 from usd_garment.fields import BodyFields, load_body_fields, save_body_fields
+from usd_garment.fields import grid as grid_module
 from usd_garment.fields.grid import DenseGrid, SparseGrid
 
 pytest.importorskip("warp")
@@ -155,6 +156,36 @@ def test_gradients_flow_to_points(fields: BodyFields, body: BodyModel) -> None:
     p = pts.detach().clone().requires_grad_(True)
     fields.sdf(p).sum().backward()
     assert float((p.grad.norm(dim=-1) - 1).abs().median()) < 0.05
+
+
+def test_single_channel_gradient_is_torchs_own_to_the_bit(
+    fields: BodyFields, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # The SDF's gradient in the points goes through a gather of the corner values
+    # (``_SingleChannelGather``) instead of embedding_bag's own backward: the same values.
+    g = torch.Generator().manual_seed(3)
+    box = torch.tensor(fields.sdf_fine.shape) * fields.sdf_fine.spacing
+    pts = fields.sdf_fine.origin + box * (0.05 + 0.9 * torch.rand(5000, 3, generator=g))
+    grad = torch.rand(5000, generator=g)
+    calls: list[int] = []
+    gather = grid_module._SingleChannelGather.apply
+
+    def counted(*args: torch.Tensor) -> torch.Tensor:
+        calls.append(len(args[0]))
+        return gather(*args)
+
+    monkeypatch.setattr(grid_module._SingleChannelGather, "apply", counted)
+    p = pts.clone().requires_grad_(True)
+    (ours,) = torch.autograd.grad(fields.sdf(p), p, grad)
+    assert calls and calls[0] == 5000
+    monkeypatch.setattr(
+        grid_module,
+        "_interpolate",
+        lambda w, table, rows: F.embedding_bag(rows, table, per_sample_weights=w, mode="sum"),
+    )
+    (torchs,) = torch.autograd.grad(fields.sdf(p), p, grad)
+    assert float(ours.abs().sum()) > 0
+    assert torch.equal(ours, torchs)
 
 
 def test_dense_grid_matches_grid_sample() -> None:

@@ -81,8 +81,37 @@ def _interpolate(w: torch.Tensor, table: torch.Tensor, rows: torch.Tensor) -> to
     """``(M, C)``: the rows ``(M, 8)`` of ``table`` ``(R, C)`` weighted by ``w`` ``(M, 8)``, as
     one fused weighted gather (``embedding_bag``: no ``(M, 8, C)`` temporary of corner values,
     which made a gather and a product an order of magnitude slower on a CPU). Differentiable
-    once in ``w`` and ``table``."""
+    once in ``w`` and ``table``; a single channel's gradient in ``w`` by
+    :class:`_SingleChannelGather`."""
+    if table.shape[1] == 1 and w.requires_grad and not table.requires_grad:
+        return _SingleChannelGather.apply(w, table, rows)
     return torch.nn.functional.embedding_bag(rows, table, per_sample_weights=w, mode="sum")
+
+
+class _SingleChannelGather(torch.autograd.Function):
+    """``embedding_bag``'s weighted sum of one channel's rows, whose gradient in the weights
+    ``(M, 8)`` is the corner values times the output's gradient: one gather. Torch's own
+    (``_embedding_bag_per_sample_weights_backward``) is six times as slow on the VAE's collision
+    term (282,000 points: 205 against 32 ms; stop 93) and gives the same values to the bit. The
+    table gets no gradient: a grid's values are constants."""
+
+    @staticmethod
+    def forward(  # type: ignore[override]
+        ctx: torch.autograd.function.FunctionCtx,
+        w: torch.Tensor,
+        table: torch.Tensor,
+        rows: torch.Tensor,
+    ) -> torch.Tensor:
+        ctx.save_for_backward(table, rows)
+        return torch.nn.functional.embedding_bag(rows, table, per_sample_weights=w, mode="sum")
+
+    @staticmethod
+    def backward(  # type: ignore[override]
+        ctx: torch.autograd.function.FunctionCtx, grad: torch.Tensor
+    ) -> tuple[torch.Tensor, None, None]:
+        table, rows = ctx.saved_tensors  # type: ignore[attr-defined]
+        corners = table.view(-1).index_select(0, rows.reshape(-1)).view(rows.shape)
+        return corners * grad, None, None
 
 
 def _register_channels(module: torch.nn.Module, channels: dict[str, torch.Tensor]) -> None:
