@@ -227,6 +227,22 @@ def test_laplacian_matches_dense_reference(data):
     assert len(mesh_edges(data.faces)) == 480  # icosphere(2): 162 + 320 − 2 edges
 
 
+def test_laplacian_sums_as_along_the_batchs_vertex_dimension(data):
+    # The sums run with the vertices leading (stop 93, three times as fast): the values and the
+    # gradient of the sums along the batch's own vertex dimension, to the bit.
+    laplacian = UniformLaplacian(data.faces, len(data.template))
+    x = torch.as_tensor(data.canonical[:4], dtype=torch.float32).requires_grad_(True)
+    grad = torch.rand(x.shape, generator=torch.Generator().manual_seed(0))
+    gathered = x.index_select(1, laplacian.cols)
+    along = (
+        x
+        - torch.zeros_like(x).index_add(1, laplacian.rows, gathered) * laplacian.inv_degree[:, None]
+    )
+    ours = laplacian(x)
+    assert torch.equal(ours, along)
+    assert torch.equal(*(torch.autograd.grad(y, x, grad)[0] for y in (ours, along)))
+
+
 def test_reconstruction_and_kl_losses():
     x = torch.zeros(2, 4, 3)
     assert reconstruction_loss(x + 0.001, x).item() == pytest.approx(12 * 0.001)
