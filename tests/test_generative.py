@@ -286,6 +286,28 @@ def test_collision_loss_with_body_fields():
     assert collision_loss(centre + 0.6 * (x - centre), fields.sdf).item() > 0.0
 
 
+def test_collision_loss_takes_the_gradient_of_one_lookup_everywhere():
+    """The loss looks up the vertices more than ε outside without a gradient (stop 93): the
+    same loss and the same gradient, to the bit, as one lookup with a gradient everywhere."""
+    from usd_garment.fields.body_fields import load_body_fields
+    from usd_garment.garment.library import load_template
+
+    fields = load_body_fields()
+    x = torch.as_tensor(load_template("tshirt", "low").vertices)[None]
+    centre = x.mean(1, keepdim=True)
+    x = torch.cat([centre + s * (x - centre) for s in (0.7, 0.9, 1.0)])  # (3, N, 3)
+    ours = x.clone().requires_grad_(True)
+    loss = collision_loss(ours, fields.sdf)
+    loss.backward()
+    whole = x.clone().requires_grad_(True)
+    reference = (COLLISION_EPSILON - fields.sdf(whole)).clamp_min(0.0).sum(-1).mean()
+    reference.backward()
+    near = fields.sdf(x) <= COLLISION_EPSILON
+    assert 0 < int(near.sum()) < near.numel()  # vertices on both sides of ε
+    assert torch.equal(loss, reference)
+    assert torch.equal(ours.grad, whole.grad)
+
+
 # -- training ------------------------------------------------------------------------------
 
 

@@ -86,8 +86,18 @@ def collision_loss(
     outside the body.
 
     The paper's L_collision is this term of the reconstructions D(E(X)) plus this term of the
-    decodings D(z) of random latents z ~ N(0, I) (the self-supervised term)."""
-    d = sdf(x).to(x.device)
+    decodings D(z) of random latents z ~ N(0, I) (the self-supervised term).
+
+    Where ``x`` needs a gradient, the SDF is looked up for every vertex without one, and again
+    with one only for the vertices at most ε outside: the others add nothing and get none. The
+    same loss and gradient as one lookup with a gradient everywhere, and on the VAE's batches
+    (64 T-shirts, most vertices farther out) a fraction of its time (stop 93)."""
+    with torch.no_grad():
+        d = sdf(x).to(x.device)
+    if x.requires_grad:
+        near = (d <= epsilon).view(-1).nonzero().squeeze(1)  # clamp_min's gradient reaches ε
+        points = x.reshape(-1, 3).index_select(0, near)
+        d = d.view(-1).index_put((near,), sdf(points).to(x.device)).view(d.shape)
     return (epsilon - d).clamp_min(0.0).sum(-1).mean()
 
 
