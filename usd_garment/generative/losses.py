@@ -90,8 +90,8 @@ def collision_loss(
 
     Where ``x`` needs a gradient, the SDF is looked up for every vertex without one, and again
     with one only for the vertices at most ε outside: the others add nothing and get none. The
-    same loss and gradient as one lookup with a gradient everywhere, and on the VAE's batches
-    (64 T-shirts, most vertices farther out) a fraction of its time (stop 93)."""
+    same loss and gradient as one lookup with a gradient everywhere; on the VAE's batches (64
+    T-shirts, most vertices farther out) the step's backward about half as long (stop 93)."""
     with torch.no_grad():
         d = sdf(x).to(x.device)
     if x.requires_grad:
