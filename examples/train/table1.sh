@@ -19,7 +19,8 @@
 # pose=1 --epochs vae=1 --epochs regressor=1" for a quick try). On 2 cores with AT_ONCE=1 about
 # 2 h an ablation's recipe (50 VAE epochs of 90 s with three at once, stop 56; the T-shirt's
 # nine regressor steps of about 3 minutes, stop 61), and for the T-shirt about 1 h more (its
-# capture members, stop 87).
+# capture members, stop 87); since stop 93 the VAEs' epochs take half as long, so about 4 h for
+# both ablations of the T-shirt (docs/learning.md, "The VAE's training step about twice as fast").
 # OUT/fig4.png: the paper's Fig. 4, member 0's VAE of each (collisions on held-out data by epoch).
 # The bench (OUT/bench_table1: report.json, chart.png, the table printed) runs on DATA's test
 # split and the AMASS-style walk (examples/heldout_walk.sh, made in OUT/heldout where it is not
