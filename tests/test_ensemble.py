@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import os
 import stat
+import subprocess
 from dataclasses import replace
 from pathlib import Path
 
@@ -487,3 +488,31 @@ def test_capture_members_script_trains_two_members_and_joins_five_in_int8(tmp_pa
         "scratch/runs_cap/cap_J_s0", "scratch/runs_cap/cap_J_s1"]  # fmt: skip
     assert combine[combine.index("--weights") + 1] == "int8"
     assert combine[combine.index("--out") + 1] == "out"
+
+
+def test_capture_members_script_takes_a_base_trained_elsewhere(tmp_path):
+    """``BASE=RUN capture_members.sh``: no base trained; each seed's first regressor step starts
+    from a copy of RUN (table1.sh passes recipe.sh's member 0's first step, the same command);
+    a BASE that holds no trained model is refused before any training."""
+    from tests.script_calls import script_calls
+
+    kept = tmp_path / "v9"
+    kept.mkdir()
+    (kept / "model.json").write_text(json.dumps({"members": [{}, {}, {}]}))
+    base = tmp_path / "T30_m0"
+    base.mkdir()
+    (base / "model.json").write_text("{}")
+    (base / "vae.marker").write_text("member 0's VAE")
+    calls = script_calls("capture_members.sh", str(kept), "out", "d", "c", tmp_path=tmp_path,
+                         env={"BASE": str(base)})  # fmt: skip
+    assert not [c for c in calls if c[:2] == ["train", "all"]]
+    assert len([c for c in calls if c[:2] == ["train", "regressor"]]) == 6
+    for seed in (0, 1):
+        copied = tmp_path / "work" / "scratch" / "runs_cap" / f"cap_J0_s{seed}" / "vae.marker"
+        assert copied.read_text() == "member 0's VAE"
+    (base / "model.json").unlink()
+    (tmp_path / "again").mkdir()
+    with pytest.raises(subprocess.CalledProcessError):
+        script_calls("capture_members.sh", str(kept), "out", "d", "c",
+                     tmp_path=tmp_path / "again", env={"BASE": str(base)})  # fmt: skip
+    assert not (tmp_path / "again" / "calls.jsonl").exists()  # nothing ran

@@ -16,7 +16,10 @@
 #   J1 (seed N) fine-tuned under the posed planes, λ 0.45, 30 epochs (tshirt_v6_step1_member0.json)
 #   J  (seed N) fine-tuned again, λ 1.5, 60 epochs (tshirt_v6_member0.json)
 # Run folders go to RUNS/cap_* (RUNS: scratch/runs_cap); a step whose folder holds its result is
-# skipped, so an interrupted run goes on where it stopped. Stop 87 on 2 cores: base 2,131 s (the
+# skipped, so an interrupted run goes on where it stopped. BASE names a run folder to use as the
+# base instead of training one into RUNS/cap_base: the same command's result (`train all` on
+# DATA's v4c with tshirt_member0.json and TRAIN_ARGS), such as recipe.sh's member 0's first step
+# (RUNS/tshirt_T30_m0), which table1.sh passes rather than train that twice. Stop 87 on 2 cores: base 2,131 s (the
 # VAE slowed by a projection beside it for its first epochs), the posed planes of the 101
 # sequences about 11 minutes (made once, in seed 0's J1), each seed's three regressor steps 5-6
 # minutes. DEVICE=cuda trains on a GPU; TRAIN_ARGS is added to every train command, as in
@@ -38,12 +41,19 @@ SET=$CAPTURES/canonical_tshirt_v4c.npz
 PLANES=$CAPTURES/planes_canonical_tshirt_v4c.npz
 mkdir -p "$RUNS"
 
-if [ ! -f "$RUNS/cap_base/model.json" ]; then
-    usd-garment train all --data "$DATA/canonical_tshirt_v4c.npz" --out "$RUNS/cap_base" \
-        --device "$DEVICE" --config "$HERE/tshirt_member0.json" --resume "${EXTRA[@]}"
+BASE=${BASE:-}
+if [ -n "$BASE" ]; then
+    [ -f "$BASE/model.json" ] || {
+        echo "capture_members.sh: BASE '$BASE' holds no trained model (model.json)" >&2; exit 2; }
+else
+    BASE=$RUNS/cap_base
+    if [ ! -f "$BASE/model.json" ]; then
+        usd-garment train all --data "$DATA/canonical_tshirt_v4c.npz" --out "$BASE" \
+            --device "$DEVICE" --config "$HERE/tshirt_member0.json" --resume "${EXTRA[@]}"
+    fi
 fi
 for seed in 0 1; do
-    from=$RUNS/cap_base
+    from=$BASE
     for step in J0:tshirt_member0: J1:tshirt_v6_step1_member0:planes J:tshirt_v6_member0:planes; do
         IFS=: read -r name settings planes <<<"$step"
         run=$RUNS/cap_${name}_s$seed

@@ -8,6 +8,8 @@
 #
 # The recipes: the dress (version 10) is recipe.sh's three members; the T-shirt (version 10) is
 # recipe.sh's three members (its version 9) and capture_members.sh's two, joined as five in int8.
+# The capture members' base is recipe.sh's member 0's first step (BASE): capture_members.sh's own
+# base is the same command (`train all` on DATA's v4c, tshirt_member0.json), not trained twice.
 # DATA: data.sh's OUT (scratch/rest by default: the rest collars the shipped models trained on);
 # CAPTURES: data_cap35.sh's OUT (scratch/cap35 by default; the T-shirt's capture members only).
 # Each ablation's model goes to OUT/GARMENT_ABLATION, its run folders to OUT/runs/ABLATION; a
@@ -18,9 +20,10 @@
 # 2-core CPU); TRAIN_ARGS is added to every train command after the ablation (e.g. "--epochs
 # pose=1 --epochs vae=1 --epochs regressor=1" for a quick try). On 2 cores with AT_ONCE=1 about
 # 2 h an ablation's recipe (50 VAE epochs of 90 s with three at once, stop 56; the T-shirt's
-# nine regressor steps of about 3 minutes, stop 61), and for the T-shirt about 1 h more (its
-# capture members, stop 87); since stop 93 the VAEs' epochs take half as long, so about 4 h for
-# both ablations of the T-shirt (docs/learning.md, "The VAE's training step about twice as fast").
+# nine regressor steps of about 3 minutes, stop 61), and for the T-shirt its capture members'
+# regressors (stop 87: the posed planes of the captures' set about 11 minutes, made once, then 5-6
+# minutes a seed); since stop 93 the VAEs' epochs take half as long, so about 3.5 h for both
+# ablations of the T-shirt (docs/learning.md, "The VAE's training step about twice as fast").
 # OUT/fig4.png: the paper's Fig. 4, member 0's VAE of each (collisions on held-out data by epoch).
 # The bench (OUT/bench_table1: report.json, chart.png, the table printed) runs on DATA's test
 # split and the AMASS-style walk (examples/heldout_walk.sh, made in OUT/heldout where it is not
@@ -54,7 +57,8 @@ for ablation in "${ABLATION_LIST[@]}"; do
     export RUNS=$runs VERSION=table1-$ablation TRAIN_ARGS="--ablation $ablation $EXTRA"
     bash "$HERE/recipe.sh" "$GARMENT" "$recipe" "$DATA"
     if [ "$GARMENT" = tshirt ]; then
-        bash "$HERE/capture_members.sh" "$recipe" "$model" "$DATA" "$CAPTURES"
+        BASE=$runs/${GARMENT}_${FIRST}_m0 \
+            bash "$HERE/capture_members.sh" "$recipe" "$model" "$DATA" "$CAPTURES"
     fi
     models+=(--model "$ablation=$model")
     firsts+=("$runs/${GARMENT}_${FIRST}_m0")
