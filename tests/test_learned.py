@@ -551,8 +551,8 @@ def test_the_table1_script_trains_each_ablation_with_the_whole_recipe(
     recipe (``recipe.sh``'s, and for the T-shirt ``capture_members.sh``'s too, on the recipe's
     members) with that ablation, then ``TRAIN_ARGS``, and in that ablation's run folders; the
     T-shirt's five members joined as the shipped model is; Fig. 4 of member 0's VAEs; then one
-    bench of the shipped model, each ablation, ``lbs`` and ``lbs+postprocess`` on the test
-    split and the AMASS-style walk."""
+    bench of the shipped model (its networks alone and its default method), each ablation,
+    ``lbs`` and ``lbs+postprocess`` on the test split and the AMASS-style walk."""
     env = {"TRAIN_ARGS": "--epochs vae=1"}  # a quick try's, after the ablation
     calls = script_calls("table1.sh", garment, "T1", "D", "C", tmp_path=tmp_path, env=env)
     ablations = ("no-collision", "no-self-supervision")
@@ -585,7 +585,7 @@ def test_the_table1_script_trains_each_ablation_with_the_whole_recipe(
     value = dict(zip(bench[2::2], bench[3::2], strict=False))
     assert value["--manifest"] == f"D/dataset_{garment}_v4" and value["--split"] == "test"
     assert [bench[i + 1] for i, a in enumerate(bench) if a == "--method"] == [
-        "learned", "lbs", "lbs+postprocess"]  # fmt: skip
+        "learned", "learned+preimage", "lbs", "lbs+postprocess"]  # fmt: skip
     assert [bench[i + 1] for i, a in enumerate(bench) if a == "--model"] == [
         f"{a}=T1/{garment}_{a}" for a in ablations]  # fmt: skip
     (tmp_path / "wrong").mkdir()
