@@ -28,7 +28,10 @@
 # whose first step fails stops the other two and the recipe. MEMBERS="0" trains only the members
 # named (e.g. an ablation of one member, TRAIN_ARGS="--ablation no-collision", against the shipped
 # member of the same seed: docs/learning.md, "The paper's Table 1 with the shipped recipe"); the
-# members are joined only when all three are named.
+# members are joined only when all three are named. Beside another job on the same cores, run it
+# with OMP_NUM_THREADS=1: at torch's default of a thread a core, a regressor step beside a
+# simulation's two workers on 2 cores took 5-33 s an epoch, against 1.7-3.5 s at one thread beside
+# those and three VAEs (stop 94; docs/learning.md, "Training").
 set -euo pipefail
 # One compound command, read whole before it runs (see data.sh).
 {
