@@ -19,10 +19,10 @@
 # skipped, so an interrupted run goes on where it stopped. BASE names a run folder to use as the
 # base instead of training one into RUNS/cap_base: the same command's result (`train all` on
 # DATA's v4c with tshirt_member0.json and TRAIN_ARGS), such as recipe.sh's member 0's first step
-# (RUNS/tshirt_T30_m0), which table1.sh passes rather than train that twice. Stop 87 on 2 cores: base 2,131 s (the
-# VAE slowed by a projection beside it for its first epochs), the posed planes of the 101
-# sequences about 11 minutes (made once, in seed 0's J1), each seed's three regressor steps 5-6
-# minutes. DEVICE=cuda trains on a GPU; TRAIN_ARGS is added to every train command, as in
+# (RUNS/tshirt_T30_m0), which table1.sh passes rather than train that twice. Stop 87 on 2 cores:
+# base 2,131 s (the VAE slowed by a projection beside it for its first epochs), the posed planes
+# of the 101 sequences about 11 minutes (made once, in seed 0's J1), each seed's three regressor
+# steps 5-6 minutes. DEVICE=cuda trains on a GPU; TRAIN_ARGS is added to every train command, as in
 # recipe.sh (e.g. TRAIN_ARGS="--ablation no-collision": examples/train/table1.sh); VERSION names
 # the joined model (10 by default).
 set -euo pipefail
