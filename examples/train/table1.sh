@@ -56,13 +56,13 @@ for ablation in "${ABLATION_LIST[@]}"; do
     [ "$GARMENT" = tshirt ] && recipe=$OUT/tshirt_${ablation}_recipe
     # read by recipe.sh and capture_members.sh alike
     export RUNS=$runs VERSION=table1-$ablation TRAIN_ARGS="--ablation $ablation $EXTRA"
+    first=$runs/${GARMENT}_${FIRST}_m0  # member 0's first step: Fig. 4's VAE, the capture base
     bash "$HERE/recipe.sh" "$GARMENT" "$recipe" "$DATA"
     if [ "$GARMENT" = tshirt ]; then
-        BASE=$runs/${GARMENT}_${FIRST}_m0 \
-            bash "$HERE/capture_members.sh" "$recipe" "$model" "$DATA" "$CAPTURES"
+        BASE=$first bash "$HERE/capture_members.sh" "$recipe" "$model" "$DATA" "$CAPTURES"
     fi
     models+=(--model "$ablation=$model")
-    firsts+=("$runs/${GARMENT}_${FIRST}_m0")
+    firsts+=("$first")
 done
 usd-garment train compare "${firsts[@]}" -o "$OUT/fig4.png"
 
